@@ -1,0 +1,1 @@
+"""Simulation, planning and control of a two-joint FRC-style arm."""

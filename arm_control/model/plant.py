@@ -1,0 +1,92 @@
+"""The simulated arm: true state, motor voltages in, sensor readings out."""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from arm_control.config import ArmConfig
+from arm_control.model.dynamics import ArmDynamics, rk4
+from arm_control.model.sensors import Sensors
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One sample of every sensor, plus the truth it was taken from."""
+
+    time_s: float
+    potentiometer_rad: np.ndarray
+    velocity_rad_s: np.ndarray
+    effort_nm: np.ndarray            # motor torque at each joint, as the motor controller reports
+    encoder_rad: np.ndarray          # relative to the last zeroing, through the lash
+    encoder_velocity_rad_s: np.ndarray
+    true_state: np.ndarray           # [θa, θb, ωa, ωb]
+    voltage: np.ndarray              # applied, after clamping
+
+
+class ArmPlant:
+    """Integrates the arm with RK4 on fixed substeps, with hard stops and ±max_voltage."""
+
+    def __init__(self, arm: ArmConfig, initial_position, physics_step_s: float = 0.001,
+                 seed: int | None = 0):
+        self.arm = arm
+        self.dynamics = ArmDynamics(arm)
+        self.physics_step_s = physics_step_s
+        self.limits = [(j.min_angle_rad, j.max_angle_rad) for j in arm.joints]
+        self.sensors = Sensors(arm.joints, initial_position, np.random.default_rng(seed))
+        self.voltage = (0.0, 0.0)
+        self.time_s = 0.0
+        self.reset(initial_position)
+
+    def reset(self, position, velocity=(0.0, 0.0)) -> None:
+        """Put the arm at ``position`` moving at ``velocity``; the encoders restart from zero."""
+        clamped = [min(max(p, lo), hi) for p, (lo, hi) in zip(position, self.limits)]
+        self.state = [float(clamped[0]), float(clamped[1]), float(velocity[0]), float(velocity[1])]
+        self.sensors.zero(clamped)
+        self._last_encoder = self.sensors.encoders()
+        self._last_encoder_time_s = self.time_s
+
+    def set_voltage(self, voltage) -> None:
+        """Hold ``voltage`` from now on, clamped to ±max_voltage; NaN is refused."""
+        if len(voltage) != 2 or not all(math.isfinite(v) for v in voltage):
+            raise ValueError(f'voltage must be two finite numbers, got {list(voltage)}')
+        limit = self.arm.max_voltage
+        self.voltage = tuple(min(max(float(v), -limit), limit) for v in voltage)
+
+    def advance(self, duration_s: float) -> None:
+        """Step the physics forward by ``duration_s`` (rounded to whole substeps)."""
+        for _ in range(max(0, round(duration_s / self.physics_step_s))):
+            self.state = rk4(self.dynamics.derivative, self.state, self.voltage,
+                             self.physics_step_s)
+            self._hard_stops()
+            self.sensors.follow(self.state[:2])
+            self.time_s += self.physics_step_s
+
+    def _hard_stops(self) -> None:
+        """A joint at a stop stays there; motion into the stop is absorbed (inelastic)."""
+        for i, (lo, hi) in enumerate(self.limits):
+            if self.state[i] < lo:
+                self.state[i] = lo
+                self.state[i + 2] = max(0.0, self.state[i + 2])
+            elif self.state[i] > hi:
+                self.state[i] = hi
+                self.state[i + 2] = min(0.0, self.state[i + 2])
+
+    def read(self) -> Reading:
+        position, velocity = self.state[:2], self.state[2:]
+        potentiometer, noisy_velocity = self.sensors.potentiometers(position, velocity)
+        encoder = self.sensors.encoders()
+        elapsed = self.time_s - self._last_encoder_time_s
+        encoder_velocity = ((encoder - self._last_encoder) / elapsed if elapsed > 0.0
+                            else np.zeros(2))
+        self._last_encoder, self._last_encoder_time_s = encoder, self.time_s
+        return Reading(
+            time_s=self.time_s,
+            potentiometer_rad=potentiometer,
+            velocity_rad_s=noisy_velocity,
+            effort_nm=np.array(self.dynamics.motor_torque(velocity, self.voltage)),
+            encoder_rad=encoder,
+            encoder_velocity_rad_s=encoder_velocity,
+            true_state=np.array(self.state),
+            voltage=np.array(self.voltage),
+        )

@@ -1,0 +1,1 @@
+"""The ROS 2 node shells: the only modules that import rclpy."""

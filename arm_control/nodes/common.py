@@ -1,0 +1,88 @@
+"""What every node shell shares: parameters from the one file, QoS by use, and main()."""
+
+import math
+
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from arm_control.config import (default_parameter_file, parameter_descriptions,
+                                ParameterError, read_parameter_file)
+
+# QoS named for its use.
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)   # maps, plans, states
+COMMANDS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+STATE_STREAM = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
+# Parameters that name further parameters: (list parameter, prefix of the named ones).
+_NAMED_BY_LIST = (('world.forbidden_regions', 'world.regions.'), ('presets.names', 'presets.'))
+
+
+def declare_parameters(node, node_name: str) -> dict:
+    """Declare every parameter of ``node_name`` with its default and description from
+    the installed ``config/arm.yaml``; return ``{name: value}`` after any overrides.
+
+    Types are checked by ``arm_control.config``, which names the parameter on failure,
+    so the descriptors allow any type (a 30 for a 30.0 is not an error).
+    """
+    path = default_parameter_file()
+    defaults = read_parameter_file(path, node_name)
+    descriptions = parameter_descriptions(path)
+    declared = []
+
+    def declare(name, value):
+        node.declare_parameter(name, value, ParameterDescriptor(
+            description=descriptions.get(name, ''), dynamic_typing=True, read_only=True))
+        declared.append(name)
+
+    for name, value in defaults.items():
+        declare(name, value)
+    for list_name, prefix in _NAMED_BY_LIST:
+        if node.has_parameter(list_name):
+            for item in node.get_parameter(list_name).value or ():
+                if isinstance(item, str) and not node.has_parameter(prefix + item):
+                    declare(prefix + item, None)
+    node.add_on_set_parameters_callback(lambda params: SetParametersResult(
+        successful=False, reason='parameters are read once at start; restart the node'))
+    return {name: node.get_parameter(name).value for name in declared}
+
+
+def finite(values) -> bool:
+    return all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)
+
+
+def status(node, level, message: str, values: dict) -> DiagnosticStatus:
+    """A DiagnosticStatus named after the node, with ``values`` as key/value pairs."""
+    return DiagnosticStatus(
+        level=level, name=node.get_fully_qualified_name(), message=message,
+        hardware_id='arm_control',
+        values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+
+
+def run(node_class, args=None) -> int:
+    """The Jazzy main() shape: construct, spin, clean up on every exit path.
+
+    A bad parameter stops the node at start with the parameter named (exit code 2).
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = node_class()
+        rclpy.spin(node)
+    except (ParameterError, ParameterException) as error:
+        rclpy.logging.get_logger(node_class.__name__).fatal(f'bad parameter: {error}')
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            shutdown = getattr(node, 'on_shutdown', None)
+            if shutdown is not None:
+                shutdown()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0

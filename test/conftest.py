@@ -1,0 +1,49 @@
+"""Shared fixtures: the default arm, and isolated ROS domains for process-level tests."""
+
+import dataclasses
+
+import pytest
+
+from arm_control import config
+
+
+@pytest.fixture(scope='session')
+def arm() -> config.ArmConfig:
+    return config.load('sim')[0]
+
+
+def with_joint(arm, joint_name, **changes):
+    """A copy of ``arm`` with fields of one joint changed."""
+    joint = dataclasses.replace(getattr(arm, joint_name), **changes)
+    return dataclasses.replace(arm, **{joint_name: joint})
+
+
+@pytest.fixture
+def domain():
+    from ros_harness import ros_domain
+    with ros_domain() as domain_id:
+        yield domain_id
+
+
+@pytest.fixture
+def probe(domain):
+    from ros_harness import Probe
+    node = Probe(domain)
+    yield node
+    node.close()
+
+
+@pytest.fixture
+def launch(domain, tmp_path):
+    """Start installed executables on the test's domain; all stopped at the end."""
+    from ros_harness import NodeProcess
+    started = []
+
+    def start(name, *ros_args):
+        process = NodeProcess(name, domain, ros_args, tmp_path)
+        started.append(process)
+        return process
+
+    yield start
+    for process in started:
+        process.stop()

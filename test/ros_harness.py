@@ -1,0 +1,133 @@
+"""Run installed executables as separate processes and probe them over DDS.
+
+Each test takes a ROS domain of its own, held by a lock file for as long as it runs, so
+parallel runs on one machine never hear each other; discovery stays on localhost.
+"""
+
+import contextlib
+import fcntl
+import os
+from pathlib import Path
+import signal
+import subprocess
+import tempfile
+import time
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+
+PACKAGE = 'arm_control'
+DOMAIN_IDS = range(1, 102)       # 0 is the default everyone shares; 101 is the last safe one
+
+
+@contextlib.contextmanager
+def ros_domain():
+    """An unused ROS_DOMAIN_ID, locked against other test processes until released."""
+    lock_dir = Path(tempfile.gettempdir()) / 'arm_control_ros_domains'
+    lock_dir.mkdir(exist_ok=True)
+    start = os.getpid() % len(DOMAIN_IDS)
+    for offset in range(len(DOMAIN_IDS)):
+        domain = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
+        handle = open(lock_dir / f'{domain}.lock', 'w')
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        try:
+            yield domain
+        finally:
+            handle.close()
+        return
+    raise RuntimeError('every ROS domain id is taken by another test process')
+
+
+def install_prefix() -> Path:
+    """The install prefix holding lib/arm_control (from AMENT_PREFIX_PATH)."""
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if prefix and (Path(prefix) / 'lib' / PACKAGE).is_dir():
+            return Path(prefix)
+    raise RuntimeError('arm_control is not installed on AMENT_PREFIX_PATH: '
+                       'run the tests with `colcon test` after `colcon build`')
+
+
+def ros_environment(domain: int) -> dict:
+    env = dict(os.environ)
+    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               PYTHONUNBUFFERED='1', RCUTILS_COLORIZED_OUTPUT='0')
+    return env
+
+
+class NodeProcess:
+    """An installed executable, ``ros2 run arm_control <name>`` style, in its own process."""
+
+    def __init__(self, name: str, domain: int, ros_args=(), log_dir: Path | None = None):
+        self.name = name
+        executable = install_prefix() / 'lib' / PACKAGE / name
+        self.log_path = Path(log_dir or tempfile.mkdtemp()) / f'{name}.log'
+        self.log = open(self.log_path, 'w')
+        command = [str(executable)]
+        if ros_args:
+            command += ['--ros-args', *ros_args]
+        self.process = subprocess.Popen(command, env=ros_environment(domain), stdout=self.log,
+                                        stderr=subprocess.STDOUT, start_new_session=True)
+
+    def output(self) -> str:
+        self.log.flush()
+        return self.log_path.read_text()
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def stop(self, timeout_s: float = 10.0) -> int:
+        if self.alive():
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.process.pid, signal.SIGKILL)
+                self.process.wait()
+        self.log.close()
+        return self.process.returncode
+
+
+class Probe:
+    """A node in the test process, on the test's domain, that waits for things with a timeout."""
+
+    def __init__(self, domain: int, name: str = 'probe'):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin_until(self, condition, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if condition():
+                return True
+            self.executor.spin_once(timeout_sec=0.05)
+        return condition()
+
+    def spin_for(self, duration_s: float) -> None:
+        self.spin_until(lambda: False, duration_s)
+
+    def collect(self, msg_type, topic: str, qos=10) -> list:
+        """Subscribe and return the list that received messages are appended to."""
+        received = []
+        self.node.create_subscription(msg_type, topic, received.append, qos)
+        return received
+
+    def call(self, srv_type, name: str, request, timeout_s: float = 10.0):
+        client = self.node.create_client(srv_type, name)
+        if not self.spin_until(client.service_is_ready, timeout_s):
+            raise TimeoutError(f'service {name} did not appear within {timeout_s} s')
+        future = client.call_async(request)
+        if not self.spin_until(future.done, timeout_s):
+            raise TimeoutError(f'service {name} did not answer within {timeout_s} s')
+        return future.result()
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)

@@ -1,0 +1,75 @@
+"""The installed ``sim`` executable, as its own process, seen from another over DDS."""
+
+import math
+import time
+
+import pytest
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+
+def wait_for_messages(probe, received, count, timeout_s=20.0):
+    assert probe.spin_until(lambda: len(received) >= count, timeout_s), \
+        f'only {len(received)} of {count} messages arrived in {timeout_s} s'
+
+
+def test_joint_states_at_the_configured_rate(launch, probe):
+    sim = launch('sim', '-p', 'publish_rate_hz:=40.0')
+    received = probe.collect(JointState, '/joint_states')
+    wait_for_messages(probe, received, 5)
+    first, start = len(received), time.monotonic()
+    probe.spin_for(3.0)
+    rate_hz = (len(received) - first) / (time.monotonic() - start)
+    assert 30.0 < rate_hz < 50.0, f'{rate_hz:.1f} Hz, expected about 40'
+    message = received[-1]
+    assert list(message.name) == ['shoulder', 'elbow']
+    assert len(message.position) == len(message.velocity) == len(message.effort) == 2
+    assert sim.alive()
+
+
+def test_arm_falls_from_horizontal_at_zero_volts(launch, probe):
+    launch('sim', '-p', 'initial_position:=[0.0, 0.0]')
+    truth = probe.collect(JointState, '/sim/ground_truth')
+    wait_for_messages(probe, truth, 1)
+    probe.spin_for(1.0)
+    start_angle = truth[0].position[0]
+    assert abs(start_angle) < 0.05
+    assert truth[-1].position[0] < start_angle - 0.1      # it fell ...
+    assert min(m.velocity[0] for m in truth) < -0.5       # ... swinging down
+    assert truth[-1].position[0] >= -0.349 - 1e-9          # onto its hard stop, not through
+
+
+def test_malformed_commands_do_not_stop_it(launch, probe):
+    sim = launch('sim', '-p', 'initial_position:=[0.0, 0.0]')
+    states = probe.collect(JointState, '/joint_states')
+    truth = probe.collect(JointState, '/sim/ground_truth')
+    wait_for_messages(probe, states, 1)
+    publisher = probe.node.create_publisher(Float64MultiArray, '/voltage_command', 10)
+    probe.spin_until(lambda: publisher.get_subscription_count() > 0, 10.0)
+    for bad in ([1.0], [1.0, 2.0, 3.0], [math.nan, 0.0], [0.0, math.inf], []):
+        publisher.publish(Float64MultiArray(data=bad))
+        probe.spin_for(0.05)
+    count = len(states)
+    probe.spin_for(1.0)
+    assert sim.alive()
+    assert len(states) > count + 20
+    assert 'rejected voltage_command' in sim.output()
+    assert all(math.isfinite(p) for m in truth[-10:] for p in m.position)
+
+
+def test_voltage_drives_the_arm_and_reset_restores_it(launch, probe):
+    launch('sim')
+    truth = probe.collect(JointState, '/sim/ground_truth')
+    wait_for_messages(probe, truth, 1)
+    publisher = probe.node.create_publisher(Float64MultiArray, '/voltage_command', 10)
+    probe.spin_until(lambda: publisher.get_subscription_count() > 0, 10.0)
+    for _ in range(25):                                    # 0.5 s of +12 V on the elbow
+        publisher.publish(Float64MultiArray(data=[0.0, 12.0]))
+        probe.spin_for(0.02)
+    assert truth[-1].position[1] > -1.5708 + 0.2
+    response = probe.call(Trigger, '/sim/reset', Trigger.Request())
+    assert response.success
+    after_reset = len(truth)
+    wait_for_messages(probe, truth, after_reset + 1)
+    assert truth[after_reset].position[1] == pytest.approx(-1.5708, abs=0.03)
