@@ -1,0 +1,1 @@
+"""The configuration space and planning in it. No ROS here."""

@@ -1,0 +1,116 @@
+"""Forbidden space: the configurations the arm may never take.
+
+A configuration q = (shoulder, elbow) is forbidden when a joint is past its limit, the elbow
+is folded tighter than ``min_elbow_fold_rad``, or any point of either link -- checked along
+the whole segment, not only at its ends -- lies inside a forbidden rectangle grown by
+``clearance_m``. Everything works on arrays of configurations at once.
+"""
+
+import math
+
+import numpy as np
+
+from arm_control.config import ArmConfig
+
+
+def segments_hit_rectangle(x0, y0, x1, y1, rect) -> np.ndarray:
+    """Whether each segment (x0, y0)–(x1, y1) meets the closed rectangle (Liang–Barsky)."""
+    x_min, y_min, x_max, y_max = rect
+    dx, dy = x1 - x0, y1 - y0
+    t_enter = np.zeros(np.shape(x0))
+    t_leave = np.ones(np.shape(x0))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        for p, q in ((-dx, x0 - x_min), (dx, x_max - x0), (-dy, y0 - y_min), (dy, y_max - y0)):
+            parallel = p == 0.0
+            t = q / np.where(parallel, 1.0, p)
+            t_enter = np.where(~parallel & (p < 0), np.maximum(t_enter, t), t_enter)
+            t_leave = np.where(~parallel & (p > 0), np.minimum(t_leave, t), t_leave)
+            outside_parallel = parallel & (q < 0)
+            t_leave = np.where(outside_parallel, -1.0, t_leave)
+    return t_enter <= t_leave
+
+
+class ForbiddenSpace:
+    """The arm's forbidden configurations, from its links, limits and world."""
+
+    def __init__(self, arm: ArmConfig):
+        self.arm = arm
+        self.upper_m = arm.shoulder.length_m
+        self.fore_m = arm.elbow.length_m
+        grow = arm.world.clearance_m
+        self.rectangles = [
+            (r.name, (r.x_min - grow, r.y_min - grow, r.x_max + grow, r.y_max + grow))
+            for r in arm.world.regions]
+        self.limits = np.array([[j.min_angle_rad, j.max_angle_rad] for j in arm.joints])
+        self.max_elbow_fold_rad = math.pi - arm.world.min_elbow_fold_rad
+
+    def _links(self, q):
+        shoulder, elbow = q[..., 0], q[..., 1]
+        x_elbow, y_elbow = self.upper_m * np.cos(shoulder), self.upper_m * np.sin(shoulder)
+        heading = shoulder + elbow
+        x_tool = x_elbow + self.fore_m * np.cos(heading)
+        y_tool = y_elbow + self.fore_m * np.sin(heading)
+        zero = np.zeros_like(x_elbow)
+        return ((zero, zero, x_elbow, y_elbow), (x_elbow, y_elbow, x_tool, y_tool))
+
+    def within_limits(self, q) -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        return (np.all((q >= self.limits[:, 0]) & (q <= self.limits[:, 1]), axis=-1)
+                & (np.abs(q[..., 1]) <= self.max_elbow_fold_rad))
+
+    def collides(self, q) -> np.ndarray:
+        """Whether a point of either link lies in a forbidden rectangle (limits aside)."""
+        q = np.asarray(q, dtype=float)
+        hit = np.zeros(q.shape[:-1], dtype=bool)
+        for link in self._links(q):
+            for _, rect in self.rectangles:
+                hit |= segments_hit_rectangle(*link, rect)
+        return hit
+
+    def is_free(self, q) -> np.ndarray | bool:
+        """True where q (shape (..., 2)) is allowed."""
+        q = np.asarray(q, dtype=float)
+        free = self.within_limits(q) & ~self.collides(q)
+        return bool(free) if free.ndim == 0 else free
+
+    def why_forbidden(self, q) -> str | None:
+        """A sentence saying why q is forbidden, or None when it is free."""
+        q = np.asarray(q, dtype=float)
+        for joint, angle, (low, high) in zip(self.arm.joints, q, self.limits):
+            if not low <= angle <= high:
+                return (f'{joint.name} at {math.degrees(angle):.1f} deg is past its limits '
+                        f'[{math.degrees(low):.1f}, {math.degrees(high):.1f}] deg')
+        if abs(q[1]) > self.max_elbow_fold_rad:
+            return (f'elbow at {math.degrees(q[1]):.1f} deg folds tighter than the minimum '
+                    f'{math.degrees(self.arm.world.min_elbow_fold_rad):.1f} deg')
+        for link_name, link in zip(('upper arm', 'forearm'), self._links(q)):
+            for name, rect in self.rectangles:
+                if segments_hit_rectangle(*link, rect):
+                    return f'the {link_name} enters the forbidden region "{name}"'
+        return None
+
+    def segment_is_free(self, q_from, q_to, step_rad: float) -> bool:
+        """Whether the straight joint-space segment is free, checked every ``step_rad``."""
+        q_from, q_to = np.asarray(q_from, float), np.asarray(q_to, float)
+        count = max(2, int(math.ceil(np.max(np.abs(q_to - q_from)) / step_rad)) + 1)
+        samples = q_from + np.linspace(0.0, 1.0, count)[:, None] * (q_to - q_from)
+        return bool(np.all(self.is_free(samples)))
+
+    def path_is_free(self, path, step_rad: float) -> bool:
+        path = np.asarray(path, float)
+        return all(self.segment_is_free(a, b, step_rad) for a, b in zip(path[:-1], path[1:]))
+
+    def lowest_point_m(self, q) -> np.ndarray:
+        """The lowest y of either link (the shoulder pivot is at y = 0): floor clearance."""
+        (_, _, _, y_elbow), (_, _, _, y_tool) = self._links(np.asarray(q, float))
+        return np.minimum(np.minimum(y_elbow, y_tool), 0.0)
+
+    def to_joint_range(self, angle: float, joint_index: int) -> float | None:
+        """The representative angle + 2πk inside the joint's limits nearest ``angle``, or None."""
+        low, high = self.limits[joint_index]
+        turn = 2.0 * math.pi
+        k_low, k_high = math.ceil((low - angle) / turn), math.floor((high - angle) / turn)
+        if k_low > k_high:
+            return None
+        k = min(range(k_low, k_high + 1), key=abs)
+        return angle + 2 * math.pi * k
