@@ -37,7 +37,9 @@ class ForbiddenSpace:
         self.arm = arm
         self.upper_m = arm.shoulder.length_m
         self.fore_m = arm.elbow.length_m
-        grow = arm.world.clearance_m
+        # Touching a region's edge is allowed (the shoulder pivot sits on the floor's):
+        # only the open interior is forbidden, so test against a rectangle a hair smaller.
+        grow = arm.world.clearance_m - 1e-9
         self.rectangles = [
             (r.name, (r.x_min - grow, r.y_min - grow, r.x_max + grow, r.y_max + grow))
             for r in arm.world.regions]
