@@ -68,7 +68,11 @@ def run(node_class, args=None) -> int:
 
     A bad parameter stops the node at start with the parameter named (exit code 2).
     """
-    rclpy.init(args=args)
+    try:
+        rclpy.init(args=args)
+    except Exception as error:      # a parameter file rcl cannot parse, a bad --ros-args
+        rclpy.logging.get_logger(node_class.__name__).fatal(f'cannot start: {error}')
+        return 2
     node = None
     try:
         node = node_class()

@@ -1,0 +1,73 @@
+"""The parameter file is the one source, and bad values are refused by name."""
+
+import math
+
+import pytest
+
+from arm_control import config
+from arm_control.config import ArmConfig, ParameterError, read_parameter_file, SimConfig
+
+
+@pytest.fixture
+def params():
+    return read_parameter_file(config.default_parameter_file(), 'sim')
+
+
+def test_default_file_describes_the_seed_arm(params):
+    arm = ArmConfig.from_parameters(params)
+    assert (arm.shoulder.length_m, arm.elbow.length_m) == (1.0, 0.8)
+    assert (arm.shoulder.mass_kg, arm.elbow.mass_kg) == (30.0, 15.0)
+    assert (arm.shoulder.motor_count, arm.elbow.motor_count) == (2, 1)
+    assert arm.shoulder.gear_ratio == arm.elbow.gear_ratio == 159.3
+    assert arm.shoulder.inertia_about_com_kgm2 == pytest.approx(30.0 * 1.0 ** 2 / 12)
+    assert arm.elbow.inertia_about_com_kgm2 == pytest.approx(15.0 * 0.8 ** 2 / 12)
+    assert SimConfig.from_parameters(params).initial_position == (1.5708, -1.5708)
+
+
+@pytest.mark.parametrize('name, value, words', [
+    ('shoulder.mass_kg', -30.0, 'must be >= 0'),
+    ('elbow.gear_ratio', 0.0, 'must be > 0'),
+    ('shoulder.length_m', 'long', 'expected a number'),
+    ('motor.stall_current_a', math.nan, 'must be finite'),
+    ('elbow.motor_count', 1.5, 'expected an integer'),
+    ('world.regions.floor', [0.0, 0.0, -1.0, 1.0], 'min < max'),
+    ('presets.stow', [0.25], 'expected 2 numbers'),
+    ('shoulder.min_angle_rad', 4.0, 'must be below shoulder.max_angle_rad'),
+])
+def test_a_bad_value_is_refused_naming_the_parameter(params, name, value, words):
+    params[name] = value
+    with pytest.raises(ParameterError) as error:
+        ArmConfig.from_parameters(params)
+    assert f"'{name}'" in str(error.value) and words in str(error.value)
+
+
+def test_a_missing_value_is_refused_naming_the_parameter(params):
+    del params['elbow.length_m']
+    with pytest.raises(ParameterError, match="'elbow.length_m' is missing"):
+        ArmConfig.from_parameters(params)
+
+
+def test_an_integer_where_a_float_is_expected_is_fine(params):
+    params['shoulder.mass_kg'] = 30
+    assert ArmConfig.from_parameters(params).shoulder.mass_kg == 30.0
+
+
+def test_sim_physics_step_must_be_at_most_a_millisecond(params):
+    params['physics_step_s'] = 0.02
+    with pytest.raises(ParameterError, match="'physics_step_s' = 0.02: must be <= 0.001"):
+        SimConfig.from_parameters(params)
+
+
+def test_unreadable_file_is_a_clear_error(tmp_path):
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('/**:\n  ros__parameters: [unclosed\n')
+    with pytest.raises(ParameterError, match='cannot read parameter file'):
+        read_parameter_file(broken, 'sim')
+
+
+def test_every_parameter_has_a_description():
+    path = config.default_parameter_file()
+    descriptions = config.parameter_descriptions(path)
+    for node in ('sim', 'controller', 'planner'):
+        for name in read_parameter_file(path, node):
+            assert descriptions.get(name), f'{name} has no comment in {path.name}'
