@@ -1,0 +1,1 @@
+"""Control: trajectories, feedback, estimation, the state machine. No ROS here."""

@@ -1,0 +1,305 @@
+"""The arm's state estimate: an extended Kalman filter (filterpy) over model and sensors (§5).
+
+Filter state x = [θa, θb, ωa, ωb, za, zb] (rad, rad/s, rad): the joints' angles and
+velocities, and each motor encoder's unknown zero z, the joint angle at which the encoder
+read 0 (where the sim started or was last reset). Input u = [Va, Vb], the applied volts.
+
+Predict: x⁺ = x + ∫ f(x, u) dt with f = ``ArmDynamics.derivative`` (the very model the sim
+integrates), RK4 on substeps of at most ``MAX_SUBSTEP_S``; joints clamped at their hard
+stops as the plant does. Covariance P⁺ = F P Fᵀ + Q: F is the RK4 substeps' map of the
+linearised ẋ = A x, A = ∂f/∂x by finite differences at the start of the step; Q is
+piecewise-constant white acceleration of σ = ``process_noise_rad_s2`` per joint plus a slow
+random walk of the encoder zeros.
+
+Update, z = [potentiometers, reported velocities, encoders], each measurement linear in x:
+
+    potentiometer_i = θi + n,  σ = potentiometer_noise_rad
+    velocity_i      = ωi + n,  σ = velocity_noise_rad_s
+    encoder_i       = θi − zi + e,  e within ±lash/2 → σ = lash/√12 (uniform over the lash)
+
+Why an EKF rather than a UKF: every measurement is exactly linear, so the EKF update is the
+exact Kalman update; only the prediction is nonlinear and, over 20 ms, nearly linear. The
+EKF integrates the mean once (4 RK4 substeps) and gets F from 4 derivative calls and a few
+4×4 products; a UKF integrates all 13 sigma points of the 6-state. Measured on the
+same 50 Hz runs (filterpy UKF, Merwe points, same noises): identical RMS errors to three
+digits, about 0.8 ms per cycle against the EKF's 0.16 ms.
+
+Resets: a potentiometer reading far outside its predicted spread (the arm was moved under
+us, e.g. the sim was reset) re-initialises the filter at that reading; an encoder
+disagreeing with the potentiometers far beyond the noise (the encoders restarted from zero)
+re-zeroes both encoder zeros at the predicted angles.
+"""
+
+import math
+
+from filterpy.common import Q_discrete_white_noise
+from filterpy.kalman import ExtendedKalmanFilter
+import numpy as np
+
+from arm_control.config import ArmConfig
+from arm_control.model.dynamics import ArmDynamics, rk4
+
+# RK4 substep of the prediction: stable and accurate at the fastest mode (≈ −110 /s, the
+# elbow motor's back-EMF with the arm straight) where one 20 ms step would not be.
+MAX_SUBSTEP_S = 0.005
+# A measurement this many predicted standard deviations off is not noise but a reset.
+RESET_GATE_SIGMA = 8.0
+# Encoder zeros drift as a random walk of this (rad/√s). The lash error is not white: it
+# sits at ±lash/2 while a joint moves one way and flips when it reverses. A zero free to
+# wander this much follows that slow part (measured: position RMS 0.25-0.3 of the raw
+# potentiometers' at 4e-3, 0.7 at 1e-4) and heals a small undetected re-zero within seconds.
+ZERO_DRIFT_RAD_PER_SQRT_S = 4e-3
+# Floor on every sensor's noise, so that S stays invertible with ideal sensors configured.
+MIN_NOISE = 1e-6
+# Relative finite-difference step of the Jacobian ∂f/∂x.
+JACOBIAN_STEP = 1e-6
+
+_POSITION, _VELOCITY, _ZERO = slice(0, 2), slice(2, 4), slice(4, 6)
+
+
+class ArmEstimator:
+    """EKF over [θa, θb, ωa, ωb, za, zb]; ``reset`` once before the first ``predict``."""
+
+    def __init__(self, arm: ArmConfig, process_noise_rad_s2: float):
+        if not (math.isfinite(process_noise_rad_s2) and process_noise_rad_s2 > 0.0):
+            raise ValueError(
+                f'process_noise_rad_s2 must be positive, got {process_noise_rad_s2}')
+        self.arm = arm
+        self.dynamics = ArmDynamics(arm)
+        self.process_noise_rad_s2 = float(process_noise_rad_s2)
+        self._lower = np.array([j.min_angle_rad for j in arm.joints])
+        self._upper = np.array([j.max_angle_rad for j in arm.joints])
+        self._pot_var = np.array([max(j.potentiometer_noise_rad, MIN_NOISE) ** 2
+                                  for j in arm.joints])
+        self._vel_var = np.array([max(j.velocity_noise_rad_s, MIN_NOISE) ** 2
+                                  for j in arm.joints])
+        # A uniform error over the lash [−lash/2, lash/2] has variance lash²/12.
+        self._lash_var = np.array([max(j.encoder_backlash_rad / math.sqrt(12.0), MIN_NOISE) ** 2
+                                   for j in arm.joints])
+        self._r_diag = np.concatenate([self._pot_var, self._vel_var, self._lash_var])
+        # z = H x: potentiometers θ, velocities ω, encoders θ − z.
+        self._h = np.zeros((6, 6))
+        self._h[0:2, 0:2] = np.eye(2)
+        self._h[2:4, 2:4] = np.eye(2)
+        self._h[4:6, 0:2] = np.eye(2)
+        self._h[4:6, 4:6] = -np.eye(2)
+        self._kf = _ModelEKF(self._integrate)
+        self._q, self._q_dt_s = None, None
+        self.jump_count = 0         # re-initialisations at a reading: the arm moved under us
+        self.rezero_count = 0       # encoder restarts detected and re-zeroed
+        self._initialised = False
+
+    # ---------------------------------------------------------------- public API
+
+    def reset(self, potentiometer_rad, encoder_rad) -> None:
+        """(Re)initialise from one reading with the arm at rest: θ = pot, ω = 0, z = pot − enc."""
+        pot = _finite_pair(potentiometer_rad, 'potentiometer_rad')
+        enc = _finite_pair(encoder_rad, 'encoder_rad')
+        self._initialise(pot, np.zeros(2), self._vel_var, enc)
+
+    def predict(self, voltage, dt_s: float) -> None:
+        """Advance the estimate by ``dt_s`` with ``voltage`` [Va, Vb] held (as applied)."""
+        self._require_initialised()
+        u = _finite_pair(voltage, 'voltage')
+        limit = self.arm.max_voltage
+        u = np.clip(u, -limit, limit)
+        if not (math.isfinite(dt_s) and dt_s >= 0.0):
+            raise ValueError(f'dt_s must be finite and non-negative, got {dt_s}')
+        if dt_s == 0.0:
+            return
+        joint = [float(v) for v in self._kf.x[:4]]
+        u_pair = (float(u[0]), float(u[1]))
+        substeps = max(1, math.ceil(dt_s / MAX_SUBSTEP_S - 1e-9))
+        step_s = dt_s / substeps
+        transition = np.eye(6)
+        transition[:4, :4] = self._rk4_transition(joint, u_pair, step_s, substeps)
+        self._kf.F = transition
+        self._kf.Q = self._process_noise(dt_s)
+        self._kf.predict(u=(u_pair, step_s, substeps))      # x by the model, P = F P Fᵀ + Q
+        self._kf.P = _symmetric(self._kf.P)
+
+    def update(self, potentiometer_rad, velocity_rad_s, encoder_rad) -> None:
+        """Correct with one reading; a non-finite element is skipped (that sensor only)."""
+        self._require_initialised()
+        kf = self._kf
+        z = np.concatenate([np.asarray(potentiometer_rad, float).reshape(2),
+                            np.asarray(velocity_rad_s, float).reshape(2),
+                            np.asarray(encoder_rad, float).reshape(2)])
+        valid = np.isfinite(z)
+        if self._jumped(z, valid):
+            return
+        self._rezero_if_encoders_restarted(z, valid)
+        if not valid.any():
+            return
+        h = self._h[valid]
+        kf.update(z[valid], lambda _x: h, lambda x: h @ x, R=np.diag(self._r_diag[valid]))
+        kf.x = np.asarray(kf.x, float).reshape(6)
+        kf.x[:4] = self._hard_stops(kf.x[:4])
+        kf.P = _symmetric(kf.P)
+
+    @property
+    def state(self) -> np.ndarray:
+        """[θa, θb, ωa, ωb] (rad, rad/s)."""
+        self._require_initialised()
+        return self._kf.x[:4].copy()
+
+    @property
+    def position_std_rad(self) -> np.ndarray:
+        """1-σ uncertainty of [θa, θb]."""
+        self._require_initialised()
+        return np.sqrt(np.diag(self._kf.P)[_POSITION])
+
+    @property
+    def velocity_std_rad_s(self) -> np.ndarray:
+        """1-σ uncertainty of [ωa, ωb]."""
+        self._require_initialised()
+        return np.sqrt(np.diag(self._kf.P)[_VELOCITY])
+
+    @property
+    def encoder_zero_rad(self) -> np.ndarray:
+        """Estimated joint angles at which the encoders read zero."""
+        self._require_initialised()
+        return self._kf.x[_ZERO].copy()
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """The full 6×6 covariance of [θa, θb, ωa, ωb, za, zb] (a copy)."""
+        self._require_initialised()
+        return self._kf.P.copy()
+
+    # ---------------------------------------------------------------- internals
+
+    def _initialise(self, pot, velocity, velocity_var, enc) -> None:
+        """θ = pot, ω = velocity, z = pot − enc; z's error is θ's plus the lash, so they covary."""
+        pot = self._clamp(pot)
+        kf = self._kf
+        kf.x = np.concatenate([pot, velocity, pot - enc])
+        p = np.zeros((6, 6))
+        for i in range(2):
+            p[i, i] = p[i, 4 + i] = p[4 + i, i] = self._pot_var[i]
+            p[4 + i, 4 + i] = self._pot_var[i] + self._lash_var[i]
+            p[2 + i, 2 + i] = velocity_var[i]
+        kf.P = p
+        self._initialised = True
+
+    def _jumped(self, z, valid) -> bool:
+        """A potentiometer far outside its predicted spread: re-initialise at the reading."""
+        p = self._kf.P
+        x = self._kf.x
+        for i in range(2):
+            if not valid[i]:
+                continue
+            spread = math.sqrt(p[i, i] + self._pot_var[i])
+            if abs(z[i] - x[i]) > RESET_GATE_SIGMA * spread:
+                pot = np.where(valid[:2], z[:2], x[_POSITION])
+                velocity = np.where(valid[2:4], z[2:4], 0.0)
+                enc = np.where(valid[4:6], z[4:6], pot - x[_ZERO])
+                self._initialise(pot, velocity, self._vel_var, enc)
+                self.jump_count += 1
+                return True
+        return False
+
+    def _rezero_if_encoders_restarted(self, z, valid) -> None:
+        """An encoder far from θ − z (beyond noise): both restarted; z := predicted θ − enc.
+
+        The new zero inherits θ's error plus the lash: P[z, ·] = P[θ, ·], var z = var θ + σ².
+        """
+        kf = self._kf
+        p, x = kf.P, kf.x
+        restarted = False
+        for i in range(2):
+            if not valid[4 + i]:
+                continue
+            innovation = z[4 + i] - (x[i] - x[4 + i])
+            spread = math.sqrt(p[i, i] + p[4 + i, 4 + i] - 2.0 * p[i, 4 + i] + self._lash_var[i])
+            restarted |= abs(innovation) > RESET_GATE_SIGMA * spread
+        if not restarted:
+            return
+        self.rezero_count += 1
+        x = x.copy()
+        p = p.copy()
+        for i in range(2):
+            if valid[4 + i]:
+                x[4 + i] = x[i] - z[4 + i]
+                p[4 + i, :] = p[i, :]
+                p[:, 4 + i] = p[:, i]
+                p[4 + i, 4 + i] = p[i, i] + self._lash_var[i]
+        kf.x, kf.P = x, _symmetric(p)
+
+    def _process_noise(self, dt_s: float) -> np.ndarray:
+        """White acceleration σ held over the step, per joint; random-walk encoder zeros."""
+        if dt_s != self._q_dt_s:
+            q = np.zeros((6, 6))
+            q[:4, :4] = Q_discrete_white_noise(
+                dim=2, dt=dt_s, var=self.process_noise_rad_s2 ** 2, block_size=2,
+                order_by_dim=False)
+            q[4, 4] = q[5, 5] = ZERO_DRIFT_RAD_PER_SQRT_S ** 2 * dt_s
+            self._q, self._q_dt_s = q, dt_s     # the loop's period rarely changes: keep Q
+        return self._q
+
+    def _integrate(self, x, u):
+        """The EKF's mean prediction: RK4 substeps of f, clamped at the stops like the plant."""
+        voltage, step_s, substeps = u
+        state = [float(v) for v in x[:4]]
+        for _ in range(substeps):
+            state = self._hard_stops(rk4(self.dynamics.derivative, state, voltage, step_s))
+        return np.concatenate([state, x[_ZERO]])
+
+    def _rk4_transition(self, joint, voltage, step_s, substeps) -> np.ndarray:
+        """F = ∂x⁺/∂x of the RK4 substeps for ẋ ≈ A x, A = ∂f/∂x at the step's start.
+
+        One substep maps by Φ = I + Ah + (Ah)²/2 + (Ah)³/6 + (Ah)⁴/24 (RK4 on a linear
+        system), so F = Φⁿ; plain numpy, cheaper and steadier under load than scipy's expm.
+        """
+        f = self.dynamics.derivative
+        f0 = f(joint, voltage)
+        columns = []
+        for i in range(4):
+            delta = JACOBIAN_STEP * max(1.0, abs(joint[i]))
+            shifted = list(joint)
+            shifted[i] += delta
+            columns.append([(a - b) / delta for a, b in zip(f(shifted, voltage), f0)])
+        ah = np.array(columns).T * step_s
+        ah2 = ah @ ah
+        phi = np.eye(4) + ah + ah2 / 2.0 + ah2 @ (ah / 6.0 + ah2 / 24.0)
+        return np.linalg.matrix_power(phi, substeps)
+
+    def _hard_stops(self, state):
+        """A joint past a stop sits at it; motion into the stop is absorbed (as in the plant)."""
+        for i in range(2):
+            if state[i] < self._lower[i]:
+                state[i] = self._lower[i]
+                state[i + 2] = max(0.0, state[i + 2])
+            elif state[i] > self._upper[i]:
+                state[i] = self._upper[i]
+                state[i + 2] = min(0.0, state[i + 2])
+        return state
+
+    def _clamp(self, position) -> np.ndarray:
+        return np.clip(np.asarray(position, float), self._lower, self._upper)
+
+    def _require_initialised(self) -> None:
+        if not self._initialised:
+            raise RuntimeError('ArmEstimator: call reset(potentiometer_rad, encoder_rad) first')
+
+
+class _ModelEKF(ExtendedKalmanFilter):
+    """filterpy's EKF with the mean predicted by a model integration, as its docs advise."""
+
+    def __init__(self, integrate):
+        super().__init__(dim_x=6, dim_z=6)
+        self._integrate = integrate
+
+    def predict_x(self, u=0):
+        self.x = self._integrate(self.x, u)
+
+
+def _finite_pair(values, name: str) -> np.ndarray:
+    pair = np.asarray(values, float).reshape(-1)
+    if pair.shape != (2,) or not np.all(np.isfinite(pair)):
+        raise ValueError(f'{name} must be two finite numbers, got {list(np.ravel(values))}')
+    return pair
+
+
+def _symmetric(p: np.ndarray) -> np.ndarray:
+    return 0.5 * (p + p.T)
