@@ -1,0 +1,293 @@
+"""Shortest collision-free joint-space paths: Dijkstra over the grid, then shortcuts.
+
+A plan is a list of joint configurations joined by straight lines in joint space (the
+arm paper's linear trajectories, §3.2), costing the joint travel Σ(|Δθa| + |Δθb|). It runs
+from the exact start, through grid cells, to the exact goal: start and goal join nearby free
+cells by checked straight segments. The grid path is then shortened by line-of-sight
+shortcuts, each checked by ``ForbiddenSpace.segment_is_free`` at ``check_step_rad``; by the
+triangle inequality a shortcut never costs more travel. A start inside forbidden space (the
+arm was pushed there) first takes the shortest way out, to the nearest free cell from which
+the goal can be reached; only that first segment is not free.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from arm_control.config import ArmConfig, PlannerConfig
+from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
+from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.planning.graph import ConfigurationGrid, path_to, segments_free
+
+# Lazily found blocked edges are cut and the search re-run at most this often per query.
+MAX_SEARCHES = 50
+# A segment is first sampled this many times more coarsely: most blocked ones fail there.
+COARSE_FACTOR = 10
+# Shortcut candidates that pass the coarse check are checked finely, farthest first, this many.
+MAX_FINE_CHECKS = 3
+BRANCH_NAMES = ('elbow-positive', 'elbow-negative')
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """A path in joint space, or the reason there is none."""
+
+    waypoints_rad: np.ndarray   # (N, 2) start -> goal, continuous angles; (0, 2) when no plan
+    reason: str                 # '' on success, else a sentence a user understands
+    cost_rad: float             # Σ(|Δθa| + |Δθb|) along the waypoints (inf when no plan)
+
+    @property
+    def ok(self) -> bool:
+        return not self.reason
+
+    @classmethod
+    def failure(cls, reason: str) -> 'Plan':
+        return cls(np.zeros((0, 2)), reason, math.inf)
+
+    @classmethod
+    def through(cls, waypoints) -> 'Plan':
+        waypoints = np.array(waypoints, dtype=float).reshape(-1, 2)
+        waypoints.setflags(write=False)
+        return cls(waypoints, '', travel_rad(waypoints))
+
+
+def travel_rad(waypoints) -> float:
+    """Σ(|Δθa| + |Δθb|) along a polyline in joint space."""
+    waypoints = np.asarray(waypoints, dtype=float).reshape(-1, 2)
+    return float(np.abs(np.diff(waypoints, axis=0)).sum())
+
+
+def _degrees(q) -> str:
+    return f'({math.degrees(q[0]):.1f}, {math.degrees(q[1]):.1f}) deg'
+
+
+class Planner:
+    """Plans on one arm's configuration space; the grid is built once, here."""
+
+    def __init__(self, arm: ArmConfig, config: PlannerConfig, *, search: str = 'scipy'):
+        self.arm = arm
+        self.config = config
+        self.search = search                       # 'scipy' or 'heapq' (for comparison)
+        self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+        self.forbidden = ForbiddenSpace(arm)
+        self.grid = ConfigurationGrid(self.forbidden, config.grid_resolution_rad,
+                                      config.check_step_rad)
+
+    # Public
+
+    def plan(self, start_q, goal_xy) -> Plan:
+        """From ``start_q`` to the point ``goal_xy`` (arm_base, m) on either IK branch;
+        the branch with the cheaper path wins."""
+        start = self._start(start_q)
+        if isinstance(start, Plan):
+            return start
+        goal_xy = np.asarray(goal_xy, dtype=float).ravel()
+        if goal_xy.shape != (2,) or not np.all(np.isfinite(goal_xy)):
+            return Plan.failure(f'the goal point must be two finite numbers (x, y), '
+                                f'got {goal_xy.tolist()}')
+        try:
+            branches = self.kinematics.inverse(*goal_xy)
+        except UnreachableError as error:
+            return Plan.failure(f'the goal is out of reach: {error}')
+        goals, refusals = [], []
+        for name, q in zip(BRANCH_NAMES, branches):
+            goal, why = self._goal(q)
+            if why is None:
+                goals.append(goal)
+            else:
+                refusals.append(f'{name} branch {_degrees(q)}: {why}')
+        if not goals:
+            return Plan.failure(
+                f'the goal ({goal_xy[0]:.3f}, {goal_xy[1]:.3f}) m is forbidden on both elbow '
+                f'branches: {"; ".join(refusals)}')
+        return self._search(start, goals)
+
+    def plan_to_configuration(self, start_q, goal_q) -> Plan:
+        """From ``start_q`` to the configuration ``goal_q`` (taken into the joint travel)."""
+        start = self._start(start_q)
+        if isinstance(start, Plan):
+            return start
+        goal_q = np.asarray(goal_q, dtype=float).ravel()
+        if goal_q.shape != (2,) or not np.all(np.isfinite(goal_q)):
+            return Plan.failure(f'the goal configuration must be two finite angles, '
+                                f'got {goal_q.tolist()}')
+        goal, why = self._goal(goal_q)
+        if why is not None:
+            return Plan.failure(f'the goal configuration {_degrees(goal_q)} is forbidden: {why}')
+        return self._search(start, [goal])
+
+    # Ends
+
+    def _in_travel(self, q) -> np.ndarray:
+        """q with each angle moved by whole turns into its joint's travel where it can be."""
+        out = np.array(q, dtype=float)
+        for k in range(2):
+            moved = self.forbidden.to_joint_range(out[k], k)
+            if moved is not None:
+                out[k] = moved
+        return out
+
+    def _start(self, start_q):
+        start = np.asarray(start_q, dtype=float).ravel()
+        if start.shape != (2,) or not np.all(np.isfinite(start)):
+            return Plan.failure(f'the start configuration must be two finite angles, '
+                                f'got {start.tolist()}')
+        return self._in_travel(start)
+
+    def _goal(self, q) -> tuple[np.ndarray, str | None]:
+        goal = self._in_travel(q)
+        return goal, self.forbidden.why_forbidden(goal)
+
+    # Search
+
+    def segment_is_free(self, q_from, q_to) -> bool:
+        """``ForbiddenSpace.segment_is_free`` at ``check_step_rad``, after a coarse pass that
+        rejects most blocked segments cheaply (a forbidden sample is forbidden at any step)."""
+        step = self.config.check_step_rad
+        coarse = self.forbidden.segment_is_free(q_from, q_to, COARSE_FACTOR * step)
+        return coarse and self.forbidden.segment_is_free(q_from, q_to, step)
+
+    def _search(self, start: np.ndarray, goals: list[np.ndarray]) -> Plan:
+        start_free = bool(self.forbidden.is_free(start))
+        lower_bounds = [float(np.abs(goal - start).sum()) for goal in goals]
+        if start_free:
+            # A free straight segment costs exactly the lower bound |Δθa| + |Δθb|.
+            direct = [k for k, goal in enumerate(goals) if self.segment_is_free(start, goal)]
+            if direct:
+                best = min(direct, key=lambda k: lower_bounds[k])
+                if lower_bounds[best] <= min(lower_bounds):
+                    return Plan.through([start, goals[best]])
+
+        grid = self.grid
+        goal_links = [grid.connections(goal, toward=True) for goal in goals]
+        goal_labels = {int(label) for nodes, _ in goal_links
+                       for label in grid.components[nodes]}
+        if not goal_labels:
+            return Plan.failure(
+                'no connection: the free space around the goal is narrower than the planner '
+                f'grid ({math.degrees(grid.resolution_rad):.2f} deg); try a finer '
+                'grid_resolution_rad')
+        escape = None
+        if start_free:
+            source_nodes, source_costs = grid.connections(start, toward=False)
+            if len(source_nodes) == 0:
+                return Plan.failure(
+                    f'no connection: the start {_degrees(start)} is boxed in by forbidden '
+                    'space closer than the planner grid reaches')
+        else:
+            escape = self._way_out(start, goal_labels)
+            if escape is None:
+                return Plan.failure(
+                    f'no connection: the start {_degrees(start)} is in forbidden space '
+                    f'({self.forbidden.why_forbidden(start)}) and no free configuration '
+                    'connected to the goal exists')
+            source_nodes = np.array([escape])
+            source_costs = np.abs(grid.configurations[escape] - start).sum(keepdims=True)
+        if not goal_labels & {int(label) for label in grid.components[source_nodes]}:
+            return Plan.failure(
+                f'no connection: forbidden space separates the start {_degrees(start)} from '
+                'the goal; no collision-free path joins them')
+
+        targets = np.concatenate([nodes for nodes, _ in goal_links])
+        target_costs = np.concatenate([costs for _, costs in goal_links])
+        which_goal = np.repeat(np.arange(len(goals)), [len(nodes) for nodes, _ in goal_links])
+        try:
+            found = grid.shortest_path(source_nodes, source_costs, targets, target_costs,
+                                       self.search, MAX_SEARCHES)
+        except RuntimeError:
+            return Plan.failure('no connection found: too many grid edges turned out blocked '
+                                'by thin forbidden regions; try a finer grid_resolution_rad')
+        if found is None:
+            return Plan.failure(
+                f'no connection: forbidden space separates the start {_degrees(start)} '
+                'from the goal; no collision-free path joins them')
+        nodes, _, target = found
+        goal = goals[which_goal[target]]
+        middle = grid.configurations[nodes]
+        path = self._shortcut(np.vstack([middle, goal] if escape is not None
+                                        else [start, middle, goal]))
+        if path is None:
+            return Plan.failure('no connection: the grid path failed its final collision '
+                                'check; try a finer grid_resolution_rad')
+        return Plan.through(path if escape is None else np.vstack([start, path]))
+
+    def _way_out(self, start: np.ndarray, labels: set[int]) -> int | None:
+        """The free node nearest ``start`` in joint travel among those that reach a goal."""
+        grid = self.grid
+        candidates = np.flatnonzero(grid.free.ravel()
+                                    & np.isin(grid.components, sorted(labels)))
+        if len(candidates) == 0:
+            return None
+        travel = np.abs(grid.configurations[candidates] - start).sum(axis=1)
+        return int(candidates[np.argmin(travel)])
+
+    def _shortcut(self, path: np.ndarray) -> np.ndarray | None:
+        """Drop the waypoints a checked straight segment can skip.
+
+        From each kept waypoint, jump to the farthest corner of the grid path in sight: all
+        corners ahead are tried at once at a coarse step (a forbidden sample is forbidden at
+        any step), then the farthest that passed is checked with
+        ``ForbiddenSpace.segment_is_free`` at ``check_step_rad``. With none in sight, the next
+        grid step (checked when the grid path was found) is kept.
+        """
+        step = self.config.check_step_rad
+        last = len(path) - 1
+        moves = np.diff(path, axis=0)
+        corners = np.flatnonzero(np.any(np.abs(np.diff(moves, axis=0)) > 1e-12, axis=1)) + 1
+        corners = np.append(corners, last)
+        kept, unchecked = [0], []
+        while kept[-1] < last:
+            anchor = kept[-1]
+            ahead = corners[corners > anchor + 1]
+            in_sight = ahead[segments_free(self.forbidden, np.broadcast_to(path[anchor], (
+                len(ahead), 2)), path[ahead], COARSE_FACTOR * step)]
+            chosen = anchor + 1
+            for corner in in_sight[::-1][:MAX_FINE_CHECKS]:
+                if self.forbidden.segment_is_free(path[anchor], path[corner], step):
+                    chosen = int(corner)
+                    break
+            if chosen == anchor + 1:
+                unchecked.append(anchor)
+            kept.append(chosen)
+        # The grid steps kept were checked with the same samples up to rounding; recheck them
+        # with the function a caller would use, and fall back to the whole grid path if not.
+        if all(self.forbidden.segment_is_free(path[a], path[a + 1], step) for a in unchecked):
+            return path[kept]
+        return path if self.forbidden.path_is_free(path, step) else None
+
+
+def poses_from_waypoints(kinematics: TwoLinkKinematics,
+                         waypoints_rad) -> list[tuple[float, float, float]]:
+    """Each waypoint's tool pose (x, y, yaw), yaw = shoulder + elbow wrapped to [−π, π)."""
+    return [tuple(float(v) for v in kinematics.tool_pose(q))
+            for q in np.asarray(waypoints_rad, dtype=float).reshape(-1, 2)]
+
+
+def _unwrapped(angle: float, near: float, low: float, high: float) -> float:
+    """angle + 2πk inside [low, high] nearest ``near``; without one, nearest ``near``."""
+    turn = 2.0 * math.pi
+    k_low, k_high = math.ceil((low - angle) / turn), math.floor((high - angle) / turn)
+    if k_low <= k_high:
+        k = min(max(round((near - angle) / turn), k_low), k_high)
+    else:
+        k = round((near - angle) / turn)
+    return angle + turn * k
+
+
+def waypoints_from_poses(kinematics: TwoLinkKinematics, poses, start_q,
+                         forbidden: ForbiddenSpace) -> np.ndarray:
+    """Tool poses (x, y, yaw) back to continuous joint angles, (N, 2).
+
+    Each angle is taken by whole turns into its joint's travel, nearest the previous
+    waypoint (``start_q`` for the first); an angle with no turn inside the travel (a start
+    pushed past a hard stop) stays nearest the previous one.
+    """
+    previous = np.asarray(start_q, dtype=float).ravel()
+    out = []
+    for x, y, yaw in poses:
+        q = kinematics.configuration_from_pose(x, y, yaw)
+        q = [_unwrapped(q[k], previous[k], *forbidden.limits[k]) for k in range(2)]
+        out.append(q)
+        previous = np.array(q)
+    return np.array(out, dtype=float).reshape(-1, 2)
