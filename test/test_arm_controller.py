@@ -1,0 +1,550 @@
+"""The controller's core in closed loop with the simulated arm, in simulated time.
+
+The arm (``ArmPlant``, sensor noise on) and the core run in-process: each control period
+the core reads the sensors, returns a voltage, and the plant integrates it. The Kalman
+filter is in the loop; nothing here reads the true state except the assertions.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from arm_control import config
+from arm_control.control.arm_controller import ArmController, SensorReading
+from arm_control.control.goals import StraightLinePlanner
+from arm_control.control.state_machine import ArmState, TRANSITIONS, Trigger
+from arm_control.control.trajectory import time_optimal_trajectory, TrajectoryLimits
+from arm_control.model.dynamics import ArmDynamics
+from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.model.plant import ArmPlant
+from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.planning.planner import Planner
+
+START = (1.5708, -1.5708)        # the sim's default: upper arm up, forearm level forward
+DEG = math.pi / 180.0
+
+
+@pytest.fixture(scope='module')
+def controller_config():
+    return config.load('controller')[1]
+
+
+@pytest.fixture(scope='module')
+def planner(arm):
+    return Planner(arm, config.load('planner')[1])
+
+
+class Rig:
+    """The plant and the core, stepped together at the control rate in simulated time."""
+
+    def __init__(self, arm, controller_config, planner=None, start=START, seed=0):
+        self.arm = arm
+        self.plant = ArmPlant(arm, start, seed=seed)
+        self.core = ArmController(arm, controller_config, planner)
+        self.period_s = 1.0 / controller_config.loop_rate_hz
+        self.forbidden = ForbiddenSpace(arm)
+        self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+        self.sensors_on = True
+        self.lowest_m = 0.0
+        self.voltages = []
+        self.arrivals = []       # (goal q, true q, true q̇) at each arrival
+
+    @property
+    def now(self) -> float:
+        return self.plant.time_s
+
+    @property
+    def true_q(self) -> np.ndarray:
+        return np.array(self.plant.state[:2])
+
+    def step(self, reading=None):
+        if reading is None and self.sensors_on:
+            reading = self.plant.read()
+        before = self.core.state
+        voltage = self.core.step(self.now, reading)
+        if before != ArmState.HOLDING and self.core.state == ArmState.HOLDING:
+            self.arrivals.append((self.core.goal_q.copy(), self.true_q,
+                                  np.array(self.plant.state[2:])))
+        self.voltages.append(voltage)
+        self.plant.set_voltage(voltage)
+        self.plant.advance(self.period_s)
+        self.lowest_m = min(self.lowest_m, float(self.forbidden.lowest_point_m(self.true_q)))
+        return voltage
+
+    def run(self, seconds, until=None) -> bool:
+        for _ in range(round(seconds / self.period_s)):
+            self.step()
+            if until is not None and until():
+                return True
+        return until is None or until()
+
+    def in_state(self, state):
+        return lambda: self.core.state == state
+
+
+def goal_q_error(rig):
+    return np.abs(rig.true_q - rig.core.goal_q)
+
+
+# --- reaching goals, with the estimator in the loop -----------------------------------------
+
+def test_reaches_every_preset_in_order_within_tolerance(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner, seed=3)
+    names = [preset[0] for preset in arm.presets]
+    for name in names:
+        assert rig.core.submit_preset(rig.now, name, preempt=False)[0]
+    assert rig.run(30.0, lambda: rig.core.counts['reached'] == len(names))
+    assert len(rig.arrivals) == len(names)
+    tolerance = controller_config.goal_tolerance_rad
+    for goal_q, true_q, true_qd in rig.arrivals:
+        assert np.all(np.abs(true_q - goal_q) < tolerance), np.degrees(true_q - goal_q)
+        assert np.all(np.abs(true_qd) < 2 * controller_config.settled_velocity_rad_s)
+    for (_, x, y) in arm.presets[-1:]:
+        assert rig.kinematics.forward(rig.true_q) == pytest.approx((x, y), abs=0.02)
+    assert rig.lowest_m == 0.0                          # no point of either link below y = 0
+    assert np.max(np.abs(rig.voltages)) <= arm.max_voltage
+    reached = [e.message for e in rig.core.events if e.message.startswith('reached')]
+    assert [m.split()[1:3] for m in reached] == [['preset', f"'{n}'"] for n in names]
+
+
+def test_holds_the_goal_after_arriving(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner, seed=4)
+    rig.core.submit_preset(rig.now, 'mid_score')
+    assert rig.run(5.0, rig.in_state(ArmState.HOLDING))
+    errors = []
+    for _ in range(100):                                # 2 s at the goal
+        rig.step()
+        errors.append(np.max(goal_q_error(rig)))
+    assert max(errors) < 0.5 * DEG
+    assert rig.core.state == ArmState.HOLDING
+
+
+def test_feedforward_alone_tracks_a_slow_trajectory(arm, controller_config):
+    """No feedback at all: the coupled inverse dynamics and the motor model, evaluated at
+    the setpoint, drive the simulated arm along a slow two-second move."""
+    dynamics = ArmDynamics(arm)
+    slow = TrajectoryLimits((0.6, 0.6), (1.0, 1.0), 11.0)
+    trajectory = time_optimal_trajectory(np.array([(0.4, 0.3), (1.3, -0.9)]), dynamics,
+                                         ForbiddenSpace(arm), slow)
+    assert trajectory.duration_s > 1.5
+    plant = ArmPlant(arm, (0.4, 0.3), seed=0)
+    period_s = 0.02
+    worst = 0.0
+    for k in range(round(trajectory.duration_s / period_s) + 25):
+        t = k * period_s
+        plant.set_voltage(dynamics.voltage_for(*trajectory.sample(t + period_s / 2)))
+        plant.advance(period_s)
+        worst = max(worst, np.max(np.abs(plant.state[:2] - trajectory.sample(t + period_s)[0])))
+    assert worst < 0.5 * DEG, f'{math.degrees(worst):.3f} deg'
+
+
+def test_works_without_the_graph_planner_where_straight_lines_are_free(arm, controller_config):
+    rig = Rig(arm, controller_config, StraightLinePlanner(arm), seed=5)
+    rig.core.submit_goal(rig.now, -1.0, 1.0)
+    assert rig.run(6.0, rig.in_state(ArmState.HOLDING))
+    assert rig.lowest_m == 0.0
+
+
+# --- the goal queue -------------------------------------------------------------------------
+
+def test_the_queue_is_bounded_and_overflow_is_rejected(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner)
+    size = controller_config.goal_queue_size
+    results = [rig.core.submit_goal(rig.now, 1.0, 0.5 + 0.01 * i) for i in range(size + 5)]
+    assert [ok for ok, _ in results] == [True] * size + [False] * 5
+    assert all('queue is full' in message for _, message in results[size:])
+    assert len(rig.core.queue) == size
+    assert [g.y_m for g in rig.core.queue] == pytest.approx([0.5 + 0.01 * i for i in range(size)])
+    rig.run(0.1)
+    assert rig.core.state == ArmState.TRACKING          # the queue still drives the arm
+
+
+def test_a_flood_of_goals_keeps_memory_bounded(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner)
+    for i in range(5000):
+        rig.core.submit_goal(rig.now, 1.0, 0.5 + 1e-5 * i)
+    assert len(rig.core.queue) == controller_config.goal_queue_size
+    assert len(rig.core.events) <= 200 and len(rig.core.take_events()) <= 200
+
+
+def test_goals_are_visited_in_order_with_a_dwell(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner)
+    rig.core.submit_goal(rig.now, 0.9, 1.0, label='first')
+    rig.core.submit_goal(rig.now, 1.0, 0.9, label='second')
+    assert rig.run(5.0, rig.in_state(ArmState.HOLDING))
+    arrived = rig.now
+    assert rig.run(2.0, rig.in_state(ArmState.TRACKING))
+    assert rig.now - arrived >= controller_config.dwell_s - rig.period_s
+    assert rig.run(5.0, lambda: rig.core.counts['reached'] == 2)
+
+
+# --- rejections ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize('goal, words', [
+    (dict(x=math.nan, y=1.0), 'not a finite number'),
+    (dict(x=1.0, y=1.0, frame_id='world'), "'world'"),
+    (dict(x=1.0, y=1.0, z=0.5), 'plane z = 0'),
+    (dict(x=5.0, y=1.0), 'out of reach'),
+    (dict(x=1.0, y=-0.5), 'forbidden space on every elbow branch'),
+])
+def test_a_rejected_goal_says_why_and_the_idle_arm_goes_to_error(arm, controller_config,
+                                                                 planner, goal, words):
+    rig = Rig(arm, controller_config, planner)
+    rig.run(0.2)
+    held = rig.true_q
+    ok, message = rig.core.submit_goal(rig.now, **goal)
+    assert not ok and words in message
+    assert rig.core.state == ArmState.ERROR
+    assert words in rig.core.last_error
+    assert any(e.level == 'warning' and words in e.message for e in rig.core.take_events())
+    rig.run(1.0)
+    assert np.max(np.abs(rig.true_q - held)) < 0.5 * DEG        # no motion
+    assert rig.core.submit_goal(rig.now, 1.0, 1.0)[0]           # and it takes the next goal
+    assert rig.run(5.0, rig.in_state(ArmState.HOLDING))
+
+
+def test_a_rejected_goal_does_not_disturb_the_motion_or_the_queue(arm, controller_config,
+                                                                  planner):
+    rig = Rig(arm, controller_config, planner)
+    rig.core.submit_preset(rig.now, 'back_score', preempt=False)
+    rig.core.submit_preset(rig.now, 'stow', preempt=False)
+    rig.run(0.2)
+    assert rig.core.state == ArmState.TRACKING
+    assert not rig.core.submit_goal(rig.now, math.inf, 0.0)[0]
+    assert not rig.core.submit_preset(rig.now, 'nonsense')[0]
+    assert rig.core.state == ArmState.TRACKING
+    assert [g.label for g in rig.core.pending_goals()] == ["preset 'back_score'", "preset 'stow'"]
+
+
+def test_unknown_preset_lists_the_known_ones(arm, controller_config):
+    core = ArmController(arm, controller_config)
+    ok, message = core.submit_preset(0.0, 'moon')
+    assert not ok and 'stow' in message and 'back_score' in message
+
+
+# --- planning hand-off ---------------------------------------------------------------------
+
+def test_asynchronous_planning_round_trip(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner=None)
+    rig.step()
+    rig.core.submit_preset(rig.now, 'high_score')
+    rig.step()
+    assert rig.core.state == ArmState.PLANNING
+    (request,) = rig.core.take_plan_requests()
+    assert rig.core.take_plan_requests() == []
+    assert request.start_q == pytest.approx(START, abs=0.02)
+    rig.run(0.3)                                         # the planner takes its time
+    timed = rig.core.time_plan(request, planner.plan(request.start_q, request.goal.xy))
+    assert timed.ok and timed.compute_s < 1.0
+    rig.core.on_timed_plan(rig.now, timed)
+    assert rig.core.state == ArmState.TRACKING
+    assert rig.run(5.0, rig.in_state(ArmState.HOLDING))
+
+
+def test_no_plan_in_time_rejects_the_goal_without_moving(arm, controller_config):
+    rig = Rig(arm, controller_config, planner=None)
+    rig.run(0.2)
+    held = rig.true_q
+    rig.core.submit_preset(rig.now, 'back_score')
+    assert rig.run(controller_config.planner_timeout_s + 0.2, rig.in_state(ArmState.ERROR))
+    assert 'did not answer within 1 s' in rig.core.last_error
+    rig.run(0.5)
+    assert np.max(np.abs(rig.true_q - held)) < 0.5 * DEG
+
+
+def test_a_late_answer_to_a_cancelled_request_is_ignored(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner=None)
+    rig.step()
+    rig.core.submit_preset(rig.now, 'back_score')
+    rig.step()
+    (request,) = rig.core.take_plan_requests()
+    rig.core.cancel(rig.now)
+    rig.core.on_plan(rig.now, request, planner.plan(request.start_q, request.goal.xy))
+    assert rig.core.state == ArmState.WAITING
+
+
+@pytest.mark.parametrize('waypoints, words', [
+    ([(1.5708, -1.5708), (0.2, -1.5708), (0.6, -0.8)], 'enters forbidden space'),
+    ([(1.0, -1.0), (0.6, -0.8)], 'not where the arm is'),
+    ([(1.5708, -1.5708), (1.5, -1.4)], 'not at the goal'),
+])
+def test_a_bad_plan_is_refused(arm, controller_config, waypoints, words):
+    """A planner bug must not move the arm: the path is checked before it is followed."""
+    rig = Rig(arm, controller_config, planner=None)
+    rig.step()
+    x, y = TwoLinkKinematics(1.0, 0.8).forward((0.6, -0.8))
+    rig.core.submit_goal(rig.now, x, y)
+    rig.step()
+    (request,) = rig.core.take_plan_requests()
+    bad = dataclasses.make_dataclass('P', ['ok', 'reason', 'waypoints_rad'])(
+        True, '', np.array(waypoints))
+    rig.core.on_plan(rig.now, request, bad)
+    assert rig.core.state == ArmState.ERROR and words in rig.core.last_error
+
+
+# --- preempting a moving arm ------------------------------------------------------------
+
+def test_a_preempting_goal_takes_over_the_moving_arm_smoothly(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner, seed=6)
+    rig.core.submit_preset(rig.now, 'back_score')
+    rig.run(0.4)
+    assert rig.core.state == ArmState.TRACKING
+    moving = np.abs(rig.core.setpoint[1])
+    assert np.max(moving) > 1.0                        # well under way
+    rig.core.submit_preset(rig.now, 'floor_pickup')
+    previous = rig.core.setpoint
+    jumps, speed_jumps = [], []
+    while rig.core.state != ArmState.HOLDING and rig.now < 10.0:
+        rig.step()
+        q, qd, qdd = rig.core.setpoint
+        jumps.append(np.max(np.abs(q - previous[0] - previous[1] * rig.period_s)))
+        speed_jumps.append(np.max(np.abs(qd - previous[1])))
+        previous = rig.core.setpoint
+    assert rig.core.state == ArmState.HOLDING
+    assert rig.kinematics.forward(rig.true_q) == pytest.approx((1.2, 0.15), abs=0.03)
+    # Position continues (within what one period of acceleration moves it) and so does
+    # velocity (within one period of the acceleration limit).
+    assert max(jumps) < 0.5 * max(controller_config.max_acceleration_rad_s2) * 0.02 ** 2 * 4
+    assert max(speed_jumps) <= max(controller_config.max_acceleration_rad_s2) * 0.02 * 1.2
+    assert rig.lowest_m == 0.0
+
+
+def test_cancel_brakes_along_the_path_and_holds(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner, seed=7)
+    rig.core.submit_preset(rig.now, 'back_score')
+    rig.core.submit_preset(rig.now, 'stow', preempt=False)
+    rig.run(0.4)
+    assert np.max(np.abs(rig.core.setpoint[1])) > 1.0
+    ok, message = rig.core.cancel(rig.now)
+    assert ok and '2 goals dropped' in message
+    assert rig.core.state == ArmState.WAITING and rig.core.pending_goals() == []
+    rig.run(1.0)
+    stopped = rig.true_q
+    rig.run(1.0)
+    assert np.max(np.abs(rig.true_q - stopped)) < 0.3 * DEG
+    assert rig.core.state == ArmState.WAITING
+    assert rig.lowest_m == 0.0
+
+
+# --- safety ------------------------------------------------------------------------------
+
+def reading_at(q):
+    return SensorReading(tuple(q), (0.0, 0.0), (0.0, 0.0))
+
+
+def test_estop_when_the_tracking_error_stays_too_large(arm, controller_config):
+    """The arm appears 25 deg off its setpoint (blocked, pushed): e-stop after 0.5 s."""
+    core = ArmController(arm, controller_config)
+    period = 0.02
+    t = 0.0
+    for _ in range(10):
+        core.step(t, reading_at(START))
+        t += period
+    off = (START[0] - 25 * DEG, START[1])
+    steps_to_estop = 0
+    while core.state != ArmState.ESTOPPED and steps_to_estop < 100:
+        voltage = core.step(t, reading_at(off))
+        t += period
+        steps_to_estop += 1
+    assert core.state == ArmState.ESTOPPED
+    limit_steps = controller_config.tracking_error_time_s / period
+    assert limit_steps <= steps_to_estop <= limit_steps + 2
+    assert list(voltage) == [0.0, 0.0]
+    assert 'tracking error' in core.last_error
+    assert list(core.step(t, reading_at(START))) == [0.0, 0.0]          # until reset
+    assert not core.submit_goal(t, 1.0, 1.0)[0]
+    assert core.reset(t)[0] and core.state == ArmState.WAITING
+    assert np.any(core.step(t + period, reading_at(START)) != 0.0)
+
+
+def test_a_short_tracking_error_spike_does_not_estop(arm, controller_config):
+    core = ArmController(arm, controller_config)
+    t, period = 0.0, 0.02
+    for _ in range(10):
+        core.step(t, reading_at(START))
+        t += period
+    for q in [(START[0] - 25 * DEG, START[1])] * 20 + [START] * 20:     # 0.4 s off, then back
+        core.step(t, reading_at(q))
+        t += period
+    assert core.state == ArmState.WAITING
+
+
+@pytest.mark.parametrize('joint, angle', [(0, -0.349 - 0.05), (1, 3.0 + 0.05)])
+def test_estop_when_a_joint_is_past_its_limit(arm, controller_config, joint, angle):
+    core = ArmController(arm, controller_config)
+    core.step(0.0, reading_at(START))
+    q = list(START)
+    q[joint] = angle
+    assert list(core.step(0.02, reading_at(q))) == [0.0, 0.0]
+    assert core.state == ArmState.ESTOPPED
+    assert 'past its limits' in core.last_error
+    assert (arm.shoulder, arm.elbow)[joint].name in core.last_error
+
+
+def test_estop_service_and_reset(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner)
+    rig.core.submit_preset(rig.now, 'back_score')
+    rig.run(0.3)
+    ok, message = rig.core.estop(rig.now)
+    assert ok and 'E-STOP' in message
+    assert list(rig.step()) == [0.0, 0.0]
+    assert rig.core.pending_goals() == []
+    assert not rig.core.submit_preset(rig.now, 'stow')[0]
+    ok, message = rig.core.reset(rig.now)
+    assert ok and 'reset from estopped' in message
+    assert rig.core.state == ArmState.WAITING
+    assert rig.core.reset(rig.now) == (False, "nothing to reset in state 'waiting'")
+
+
+def test_stops_commanding_when_joint_states_stop_and_recovers(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner, seed=8)
+    rig.core.submit_preset(rig.now, 'high_score')
+    rig.core.submit_preset(rig.now, 'stow', preempt=False)
+    rig.run(0.3)
+    rig.sensors_on = False
+    lost_at = rig.now
+    assert rig.run(1.0, rig.in_state(ArmState.NO_SENSORS))
+    assert rig.now - lost_at <= controller_config.joint_state_timeout_s + 2 * rig.period_s
+    assert list(rig.voltages[-1]) == [0.0, 0.0]
+    assert 'no joint states' in rig.core.last_error
+    rig.run(0.3)
+    assert all(list(v) == [0.0, 0.0] for v in rig.voltages[-10:])
+    rig.sensors_on = True
+    rig.step()
+    assert rig.core.state in (ArmState.WAITING, ArmState.PLANNING, ArmState.TRACKING)
+    # The interrupted goal and the queue come back: both are reached.
+    assert rig.run(10.0, lambda: rig.core.counts['reached'] == 2)
+    assert rig.core.current_goal is None and not rig.core.queue
+
+
+def test_disable_sends_zero_and_enable_holds_where_the_arm_is(arm, controller_config, planner):
+    rig = Rig(arm, controller_config, planner)
+    rig.run(0.2)
+    assert rig.core.enable(rig.now, False) == (True, 'disabled')
+    assert list(rig.step()) == [0.0, 0.0]
+    assert not rig.core.submit_goal(rig.now, 1.0, 1.0)[0]
+    rig.run(0.3)                                       # it sags under gravity
+    rig.core.enable(rig.now, True)
+    here = rig.true_q
+    rig.run(1.0)
+    assert np.max(np.abs(rig.true_q - here)) < 1.0 * DEG
+    assert rig.core.state == ArmState.WAITING
+
+
+# --- driver mode -----------------------------------------------------------------------------
+
+def test_driver_mode_moves_the_tool_at_the_commanded_velocity(arm, controller_config):
+    rig = Rig(arm, controller_config)
+    rig.run(0.2)
+    for _ in range(50):                                 # 1 s at 0.3 m/s forward
+        rig.core.driver_command(rig.now, 0.3, 0.0)
+        rig.step()
+    q, qd, _ = rig.core.setpoint
+    tool_velocity = rig.kinematics.jacobian(q) @ qd
+    assert tool_velocity == pytest.approx((0.3, 0.0), abs=0.01)
+    assert rig.core.state == ArmState.DRIVER
+
+
+def test_driver_mode_stops_short_of_the_floor_and_holds(arm, controller_config):
+    rig = Rig(arm, controller_config, start=(0.8, -1.2))
+    rig.run(0.2)
+    for _ in range(150):                                # 3 s of full stick straight down
+        rig.core.driver_command(rig.now, 0.0, -5.0)
+        rig.step()
+    x, y = rig.kinematics.forward(rig.true_q)
+    assert y > 0.0 and rig.true_q[0] > 0.0              # short of the floor ...
+    assert y < 0.25                                     # ... but it did go down
+    assert rig.lowest_m == 0.0
+    assert rig.run(1.0, rig.in_state(ArmState.WAITING))  # commands stopped: hold
+    here = rig.true_q
+    rig.run(1.0)
+    assert np.max(np.abs(rig.true_q - here)) < 0.3 * DEG
+
+
+def test_driver_speed_is_limited(arm, controller_config):
+    core = ArmController(arm, controller_config)
+    core.step(0.0, reading_at(START))
+    core.driver_command(0.0, 100.0, 0.0)
+    assert np.hypot(*core.driver_velocity_mps) == pytest.approx(
+        controller_config.driver_max_speed_mps)
+    assert not core.driver_command(0.0, math.nan, 0.0)[0]
+
+
+# --- every transition of the table, taken by the real controller -------------------------
+
+def bring_to(state, arm, controller_config, planner):
+    """A rig whose core is in ``state``."""
+    asynchronous = state == ArmState.PLANNING
+    rig = Rig(arm, controller_config, None if asynchronous else planner)
+    if state == ArmState.NO_SENSORS:
+        return rig
+    rig.step()
+    core = rig.core
+    if state == ArmState.PLANNING:
+        core.submit_preset(rig.now, 'high_score')
+        rig.step()
+    elif state == ArmState.TRACKING:
+        core.submit_preset(rig.now, 'back_score')
+        rig.step()
+    elif state == ArmState.HOLDING:
+        core.submit_goal(rig.now, 0.85, 1.0)
+        rig.run(5.0, rig.in_state(ArmState.HOLDING))
+    elif state == ArmState.ERROR:
+        core.submit_goal(rig.now, math.nan, 0.0)
+    elif state == ArmState.DRIVER:
+        core.driver_command(rig.now, 0.1, 0.0)
+        rig.step()
+    elif state == ArmState.ESTOPPED:
+        core.estop(rig.now)
+    elif state == ArmState.DISABLED:
+        core.enable(rig.now, False)
+    assert core.state == state
+    return rig
+
+
+def take(trigger, rig, planner):
+    """Do to the controller what should fire ``trigger`` in its current state."""
+    core, state = rig.core, rig.core.state
+    if trigger == Trigger.SENSORS_BACK:
+        rig.step()
+    elif trigger == Trigger.SENSORS_LOST:
+        rig.sensors_on = False
+        rig.run(0.3)
+    elif trigger == Trigger.GOAL:
+        if state in (ArmState.PLANNING, ArmState.TRACKING, ArmState.DRIVER):
+            core.submit_preset(rig.now, 'mid_score')      # preempts (a queued goal waits)
+        else:
+            core.submit_goal(rig.now, 1.0, 1.0)
+        rig.run(1.0, lambda: core.state != state)
+    elif trigger == Trigger.PLAN_READY:
+        (request,) = core.take_plan_requests()
+        core.on_plan(rig.now, request, planner.plan(request.start_q, request.goal.xy))
+    elif trigger == Trigger.PLAN_FAILED:
+        rig.run(2.0, rig.in_state(ArmState.ERROR))
+    elif trigger == Trigger.ARRIVED:
+        rig.run(6.0, rig.in_state(ArmState.HOLDING))
+    elif trigger == Trigger.GOAL_FAILED:
+        core.submit_goal(rig.now, 1.0, 1.0, frame_id='map')
+    elif trigger == Trigger.CANCEL:
+        core.cancel(rig.now)
+    elif trigger == Trigger.ESTOP:
+        core.estop(rig.now)
+    elif trigger == Trigger.RESET:
+        core.reset(rig.now)
+    elif trigger == Trigger.DISABLE:
+        core.enable(rig.now, False)
+    elif trigger == Trigger.ENABLE:
+        core.enable(rig.now, True)
+    elif trigger == Trigger.DRIVER_COMMAND:
+        core.driver_command(rig.now, 0.1, 0.0)
+    elif trigger == Trigger.DRIVER_IDLE:
+        rig.run(2.0, rig.in_state(ArmState.WAITING))
+
+
+@pytest.mark.parametrize('state, trigger', sorted(TRANSITIONS, key=str))
+def test_the_controller_takes_each_transition(arm, controller_config, planner, state, trigger):
+    rig = bring_to(state, arm, controller_config, planner)
+    take(trigger, rig, planner)
+    assert (state, trigger, TRANSITIONS[(state, trigger)]) in rig.core.machine.history
