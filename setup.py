@@ -13,6 +13,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+        ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -26,6 +27,10 @@ setup(
             'sim = arm_control.nodes.sim:main',
             'controller = arm_control.nodes.controller:main',
             'planner = arm_control.nodes.planner:main',
+            'viewer = arm_control.nodes.viewer:main',
+            'markers = arm_control.nodes.markers:main',
+            'recorder = arm_control.nodes.recorder:main',
+            'plot_run = arm_control.visual.plots:main',
         ],
     },
 )

@@ -1,0 +1,189 @@
+"""The ``viewer`` node: the arm, live, in a window -- or headless, as a PNG file.
+
+Subscribes ``joint_states``, ``arm_state``, ``planned_path``, ``cspace_map``, ``goal_point``
+and (when the controller publishes it) ``controller/setpoint``; draws them with
+``arm_control.visual.scene``. In a window a left click on the workspace publishes a
+``goal_point`` in ``arm_base`` and a ghost follows the mouse. With ``headless:=true``, or with
+no display, it writes the picture to ``png_path`` ``png_rate_hz`` times a second instead.
+"""
+
+import math
+import os
+import sys
+import time
+
+from geometry_msgs.msg import PointStamped
+from nav_msgs.msg import OccupancyGrid, Path
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from arm_control.config import ArmConfig, JOINT_NAMES
+from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, STATE_STREAM
+from arm_control.visual.scene import cspace_from_occupancy, SceneView, workspace_extent
+from arm_control.visual.viewer_model import ViewerConfig, ViewerModel
+
+FRAME = 'arm_base'
+
+
+def have_display() -> bool:
+    return bool(os.environ.get('DISPLAY') or os.environ.get('WAYLAND_DISPLAY'))
+
+
+def joint_positions(msg: JointState):
+    """(shoulder, elbow) from a JointState, by name when it has names, else in order."""
+    names = list(msg.name)
+    position = list(msg.position)
+    if names and all(name in names for name in JOINT_NAMES) and len(names) == len(position):
+        return [position[names.index(name)] for name in JOINT_NAMES]
+    return position
+
+
+def yaw_of(orientation) -> float:
+    """Rotation about z of a quaternion: atan2(2(wz + xy), 1 − 2(y² + z²))."""
+    q = orientation
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+class ViewerNode(Node):
+
+    def __init__(self):
+        super().__init__('viewer')
+        params = declare_parameters(self, 'viewer')
+        self.arm = ArmConfig.from_parameters(params)
+        self.config = ViewerConfig.from_parameters(params)
+        self.model = ViewerModel(self.arm, self.config.goal_reached_m)
+        self.window_closed = False
+
+        figure = None
+        self.headless = self.config.headless or not have_display()
+        if not self.headless:
+            try:
+                figure = self._open_window()
+            except Exception as error:           # no Tk, display refused: still useful headless
+                self.get_logger().warning(f'cannot open a window ({error}): rendering to '
+                                          f'{self.config.png_path} instead')
+                self.headless = True
+        self.view = SceneView(self.arm, figure=figure)
+
+        self.goal_pub = self.create_publisher(PointStamped, 'goal_point', COMMANDS)
+        self.create_subscription(JointState, 'joint_states', self.on_joint_states, STATE_STREAM)
+        self.create_subscription(JointState, 'controller/setpoint', self.on_setpoint,
+                                 STATE_STREAM)
+        self.create_subscription(String, 'arm_state', self.on_state, LATCHED)
+        self.create_subscription(Path, 'planned_path', self.on_path, LATCHED)
+        self.create_subscription(OccupancyGrid, 'cspace_map', self.on_cspace_map, LATCHED)
+        self.create_subscription(PointStamped, 'goal_point', self.on_goal, COMMANDS)
+
+        if self.headless:
+            self.create_timer(1.0 / self.config.png_rate_hz, self.write_png)
+            self.get_logger().info(f'headless: writing {self.config.png_path} '
+                                   f'{self.config.png_rate_hz:g} times a second')
+        else:
+            self.view.start_live()
+            canvas = self.view.figure.canvas
+            canvas.mpl_connect('motion_notify_event', self.on_mouse_move)
+            canvas.mpl_connect('axes_leave_event', self.on_mouse_leave)
+            canvas.mpl_connect('button_press_event', self.on_click)
+            canvas.mpl_connect('close_event', self.on_window_closed)
+            self.create_timer(1.0 / self.config.rate_hz, self.refresh_window)
+            self.get_logger().info('viewer window open: click to send a goal_point')
+
+    def _open_window(self):
+        import matplotlib
+        matplotlib.use('TkAgg')
+        matplotlib.rcParams['toolbar'] = 'None'    # a click means a goal, never pan or zoom
+        from matplotlib import pyplot
+        width_px, height_px = SceneView.natural_size_px(workspace_extent(self.arm))
+        figure = pyplot.figure('arm_control viewer', figsize=(width_px / 100, height_px / 100),
+                               dpi=100)
+        pyplot.show(block=False)
+        return figure
+
+    # -- messages in ---------------------------------------------------------------------
+
+    def _refused(self, why) -> None:
+        if why:
+            self.get_logger().warning(why, throttle_duration_sec=2.0)
+
+    def on_joint_states(self, msg: JointState) -> None:
+        self._refused(self.model.on_joint_state(joint_positions(msg), time.monotonic()))
+
+    def on_setpoint(self, msg: JointState) -> None:
+        self._refused(self.model.on_setpoint(joint_positions(msg)))
+
+    def on_state(self, msg: String) -> None:
+        self.model.on_state(msg.data)
+
+    def on_path(self, msg: Path) -> None:
+        poses = [(p.pose.position.x, p.pose.position.y, yaw_of(p.pose.orientation))
+                 for p in msg.poses]
+        self._refused(self.model.on_path(poses))
+
+    def on_goal(self, msg: PointStamped) -> None:
+        why = self.model.on_goal(msg.point.x, msg.point.y, msg.point.z, msg.header.frame_id)
+        if why:
+            self.get_logger().info(f'not shown as queued: {why}', throttle_duration_sec=2.0)
+
+    def on_cspace_map(self, msg: OccupancyGrid) -> None:
+        info = msg.info
+        try:
+            image = cspace_from_occupancy(info.width, info.height, info.resolution,
+                                          info.origin.position.x, info.origin.position.y,
+                                          msg.data)
+        except ValueError as error:
+            self.get_logger().warning(f'cspace_map ignored: {error}', throttle_duration_sec=5.0)
+            return
+        self.view.set_cspace(image)
+
+    # -- the window ----------------------------------------------------------------------
+
+    def on_mouse_move(self, event) -> None:
+        self.model.ghost_xy = self.view.workspace_point(event)
+
+    def on_mouse_leave(self, event) -> None:
+        self.model.ghost_xy = None
+
+    def on_click(self, event) -> None:
+        point = self.view.workspace_point(event)
+        if point is None or event.button != 1:
+            return
+        msg = PointStamped()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = FRAME
+        msg.point.x, msg.point.y = point
+        self.goal_pub.publish(msg)
+        self.get_logger().info(f'goal_point ({point[0]:.3f}, {point[1]:.3f}) m published')
+
+    def on_window_closed(self, event) -> None:
+        self.window_closed = True
+
+    def refresh_window(self) -> None:
+        if self.window_closed:
+            self.get_logger().info('window closed: stopping')
+            self.context.try_shutdown()         # rclpy.spin returns; run() cleans up
+            return
+        self.view.draw_live(self.model.scene(time.monotonic()))
+        self.view.figure.canvas.flush_events()
+
+    def write_png(self) -> None:
+        path = self.config.png_path
+        partial = f'{path}.part'
+        try:
+            self.view.render_png(self.model.scene(time.monotonic()), partial)
+            os.replace(partial, path)          # readers never see half a picture
+        except OSError as error:
+            self.get_logger().error(f'cannot write {path}: {error}', throttle_duration_sec=10.0)
+
+    def on_shutdown(self) -> None:
+        if not self.headless:
+            from matplotlib import pyplot
+            pyplot.close('all')
+
+
+def main(args=None):
+    sys.exit(run(ViewerNode, args))
+
+
+if __name__ == '__main__':
+    main()

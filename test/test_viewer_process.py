@@ -1,0 +1,112 @@
+"""The installed viewer, markers and recorder executables, each beside a real sim."""
+
+import math
+
+from geometry_msgs.msg import PointStamped
+from matplotlib import image
+import numpy as np
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+from visualization_msgs.msg import MarkerArray
+
+from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.nodes.common import COMMANDS, LATCHED
+from arm_control.visual.recording import Recording
+from arm_control.visual.scene import GOAL_COLOUR, SceneView, state_colour
+
+
+def rgb(colour):
+    return np.array([int(colour[i:i + 2], 16) for i in (1, 3, 5)])
+
+
+def colour_near(picture, pixel, colour, radius=2, tolerance=40):
+    column, row = pixel
+    patch = picture[row - radius:row + radius + 1, column - radius:column + radius + 1, :3]
+    return bool(np.any(np.max(np.abs(patch.astype(int) - rgb(colour)), axis=-1) <= tolerance))
+
+
+def publish_latched_state(probe, state):
+    publisher = probe.node.create_publisher(String, '/arm_state', LATCHED)
+    publisher.publish(String(data=state))
+    return publisher
+
+
+def test_headless_viewer_draws_the_sim_arm_in_the_state_colour_with_goals(
+        launch, probe, tmp_path, arm):
+    png = tmp_path / 'viewer.png'
+    launch('sim')
+    viewer = launch('viewer', '-p', 'headless:=true', '-p', f'png_path:={png}',
+                    '-p', 'png_rate_hz:=5.0')
+    states = probe.collect(JointState, '/joint_states')
+    assert probe.spin_until(lambda: len(states) > 0, 20.0), 'no joint_states from the sim'
+    _ = publish_latched_state(probe, 'tracking')
+    goals = probe.node.create_publisher(PointStamped, '/goal_point', COMMANDS)
+    assert probe.spin_until(lambda: goals.get_subscription_count() > 0, 20.0), \
+        'the viewer never subscribed to goal_point'
+    goal = PointStamped()
+    goal.header.frame_id = 'arm_base'
+    goal.point.x, goal.point.y = 1.2, 0.5
+    goals.publish(goal)
+
+    kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+    reference = SceneView(arm)                  # the same layout: where points land
+    goal_pixel = reference.pixel_of(1.2, 0.5)
+
+    def shows_everything():
+        """The arm where the sim says it is (it falls at 0 V, then rests), and the goal."""
+        if not png.exists():
+            return False
+        picture = (image.imread(png)[..., :3] * 255).round().astype(np.uint8)
+        q = states[-1].position
+        elbow, tool = np.array(kinematics.elbow_point(q)), np.array(kinematics.forward(q))
+        link_pixels = [reference.pixel_of(*(f * elbow)) for f in (0.3, 0.6)] + \
+            [reference.pixel_of(*(elbow + f * (tool - elbow))) for f in (0.3, 0.6)]
+        return (all(colour_near(picture, p, state_colour('tracking')) for p in link_pixels)
+                and colour_near(picture, (goal_pixel[0] + 4, goal_pixel[1]), GOAL_COLOUR, 1))
+
+    assert probe.spin_until(shows_everything, 30.0), \
+        f'{png} never showed the arm in the tracking colour and the goal\n{viewer.output()}'
+    assert viewer.alive()
+
+
+def test_markers_follow_the_sim(launch, probe, arm):
+    launch('sim')
+    launch('markers')
+    received = probe.collect(MarkerArray, '/arm_markers')
+    states = probe.collect(JointState, '/joint_states')
+    assert probe.spin_until(lambda: len(received) >= 3 and states, 30.0), 'no arm_markers'
+    kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+
+    def tool_where_the_sim_says():
+        """The arm falls at 0 V and comes to rest: then markers and sim agree."""
+        links = next(m for m in received[-1].markers if m.ns == 'arm')
+        tool = kinematics.forward(states[-1].position)
+        return math.dist((links.points[2].x, links.points[2].y), tool) < 0.01
+
+    assert probe.spin_until(tool_where_the_sim_says, 30.0)
+    links = next(m for m in received[-1].markers if m.ns == 'arm')
+    assert links.header.frame_id == 'arm_base'
+
+
+def test_recorder_saves_what_it_heard(launch, probe, tmp_path):
+    output = tmp_path / 'run.npz'
+    launch('sim')
+    recorder = launch('recorder', '-p', f'output_path:={output}', '-p', 'flush_period_s:=0.5')
+    truth = probe.collect(JointState, '/sim/ground_truth')
+    assert probe.spin_until(lambda: len(truth) > 0, 20.0)
+    _ = publish_latched_state(probe, 'waiting')
+    voltage = probe.node.create_publisher(Float64MultiArray, '/voltage_command', COMMANDS)
+    assert probe.spin_until(lambda: voltage.get_subscription_count() >= 2, 20.0)
+    for _ in range(25):
+        voltage.publish(Float64MultiArray(data=[1.5, -0.5]))
+        probe.spin_for(0.02)
+    probe.spin_for(1.0)
+    assert recorder.stop() == 0, recorder.output()
+    recording = Recording.load(output)
+    assert len(recording.arrays('measured')['time_s']) > 20
+    assert len(recording.arrays('truth')['time_s']) > 20
+    assert np.all(recording.arrays('voltage')['value'] == [1.5, -0.5])
+    assert len(recording.arrays('voltage')['time_s']) >= 20
+    assert list(recording.arrays('state')['name']) == ['waiting']
+    times = recording.arrays('measured')['time_s']
+    assert np.all(np.diff(times) > 0)
