@@ -455,3 +455,39 @@ def test_plan_values():
     assert plan.cost_rad == pytest.approx(0.1 + 0.2 + 0.2)
     with pytest.raises(ValueError):
         plan.waypoints_rad[0, 0] = 1.0
+    repeated = Plan.through([[0.0, 0.0], [0.0, 0.0], [0.3, -0.2], [0.3, -0.2]])
+    np.testing.assert_array_equal(repeated.waypoints_rad, [[0.0, 0.0], [0.3, -0.2]])
+    assert Plan.through([[0.1, 0.2], [0.1, 0.2]]).waypoints_rad.shape == (2, 2)
+
+
+def test_a_start_on_a_grid_cell_gives_no_zero_length_segment(frc):
+    grid = frc.grid
+    start = grid.configurations[grid.node_of(207, 96)]      # about (187.5°, -75°), back
+    goal = np.radians([45.0, -53.0])                          # front, high
+    assert not frc.segment_is_free(start, goal)
+    plan = frc.plan_to_configuration(start, goal)
+    assert_free_path(frc, plan, start, goal)
+    assert np.all(np.abs(np.diff(plan.waypoints_rad, axis=0)).sum(axis=1) > 0)
+
+
+def test_an_edge_through_a_thin_forbidden_sliver_is_found_and_cut(frc_forbidden):
+    """Some neighbouring free cells are joined by a segment that grazes forbidden space
+    (the tower and the bumpers are thin). The lazy search must never return such an edge:
+    from one end to the other it goes round, as far as brute force says."""
+    eager = ConfigurationGrid(frc_forbidden, 0.35, 0.01)
+    before = eager.indices.copy()
+    assert eager.check_all_edges() > 0
+    cut = np.flatnonzero(eager.indices != before)
+    lazy = ConfigurationGrid(frc_forbidden, 0.35, 0.01)
+    for slot in cut:
+        a, b = slot // len(DIRECTIONS), int(before[slot])
+        expected = brute_force_distances(frc_forbidden, lazy, a, 0.01)[b]
+        found = lazy.shortest_path([a], [0.0], [b], [0.0])
+        if not math.isfinite(expected):
+            assert found is None
+            continue
+        nodes, cost, _ = found
+        assert len(nodes) > 2
+        assert cost == pytest.approx(expected, rel=2e-5)
+        assert frc_forbidden.path_is_free(lazy.configurations[nodes], 0.01)
+    assert lazy.blocked_edges > 0

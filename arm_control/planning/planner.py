@@ -31,7 +31,12 @@ BRANCH_NAMES = ('elbow-positive', 'elbow-negative')
 
 @dataclass(frozen=True, eq=False)
 class Plan:
-    """A path in joint space, or the reason there is none."""
+    """A path in joint space, or the reason there is none.
+
+    Waypoints are continuous angles inside the joint travel, joined by straight segments
+    that never enter forbidden space -- except a start pushed into it (even past a hard
+    stop), whose first segment is the shortest way out.
+    """
 
     waypoints_rad: np.ndarray   # (N, 2) start -> goal, continuous angles; (0, 2) when no plan
     reason: str                 # '' on success, else a sentence a user understands
@@ -47,7 +52,11 @@ class Plan:
 
     @classmethod
     def through(cls, waypoints) -> 'Plan':
+        """A plan along ``waypoints``, repeated points dropped (no zero-length segments,
+        but always a start and a goal, equal when the arm is already there)."""
         waypoints = np.array(waypoints, dtype=float).reshape(-1, 2)
+        moved = np.concatenate([[True], np.any(np.diff(waypoints, axis=0) != 0.0, axis=1)])
+        waypoints = waypoints[moved] if np.count_nonzero(moved) >= 2 else waypoints[[0, -1]]
         waypoints.setflags(write=False)
         return cls(waypoints, '', travel_rad(waypoints))
 
@@ -68,7 +77,9 @@ class Planner:
     def __init__(self, arm: ArmConfig, config: PlannerConfig, *, search: str = 'scipy'):
         self.arm = arm
         self.config = config
-        self.search = search                       # 'scipy' or 'heapq' (for comparison)
+        if search not in ('scipy', 'heapq'):
+            raise ValueError(f"search = {search!r}: expected 'scipy' or 'heapq'")
+        self.search = search                       # 'heapq': the plain one, for comparison
         self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
         self.forbidden = ForbiddenSpace(arm)
         self.grid = ConfigurationGrid(self.forbidden, config.grid_resolution_rad,

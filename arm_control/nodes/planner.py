@@ -1,0 +1,228 @@
+"""The ``planner`` node: collision-free joint-space paths on request.
+
+Serves ``plan_path`` (nav_msgs/GetPlan): ``start`` = the tool pose (x, y, yaw as a rotation
+about z) of the configuration to plan from, ``goal`` = the target position (its orientation
+is ignored: the planner picks the elbow branch), both in ``arm_base`` (an empty frame_id
+means ``arm_base``). The response is a Path of tool poses in ``arm_base``, start to goal;
+consecutive poses are joined by straight lines in joint space (turn them back into joint
+angles with ``arm_control.planning.planner.waypoints_from_poses``). An empty path means no
+plan; the reason is logged.
+
+Publishes ``planned_path`` (Path, latched: the last successful plan), ``cspace_map``
+(OccupancyGrid, latched, published once at start) and ``/diagnostics``.
+
+``cspace_map`` is the configuration space as a map in frame ``cspace`` (set RViz's fixed
+frame to it): cell (i, j) = (shoulder cell i, elbow cell j), so x is the shoulder angle and
+y the elbow angle, metres standing for radians. ``info.resolution`` = grid_resolution_rad;
+``info.origin`` = (shoulder, elbow) of the corner of cell (0, 0), so cell (i, j) is centred
+at origin + (i + ½, j + ½) · resolution; ``data[j · width + i]`` = 100 forbidden, 0 free.
+The grid spans each joint's travel between its hard stops (see planning/graph.py).
+"""
+
+import math
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseStamped, Quaternion
+from nav_msgs.msg import OccupancyGrid, Path
+from nav_msgs.srv import GetPlan
+import numpy as np
+from rclpy.node import Node
+
+from arm_control.config import ArmConfig, PlannerConfig
+from arm_control.nodes.common import declare_parameters, LATCHED, run, status
+from arm_control.planning.planner import Planner, poses_from_waypoints
+
+FRAME = 'arm_base'
+CSPACE_FRAME = 'cspace'
+PLANAR_TOLERANCE_M = 0.001        # a goal's z must be 0 within this (DESIGN.md §2)
+POSE_TOLERANCE_M = 0.001          # a start pose must be a pose of this arm within this
+
+
+class RequestError(ValueError):
+    """A plan_path request that cannot be planned as asked."""
+
+
+def yaw_from_quaternion(q) -> float:
+    """The rotation about z of a quaternion that is one (x = y = 0 after normalising)."""
+    values = [q.x, q.y, q.z, q.w]
+    if not all(math.isfinite(v) for v in values):
+        raise RequestError(f'start orientation {values} is not finite')
+    norm = math.sqrt(sum(v * v for v in values))
+    if norm < 1e-9:
+        raise RequestError('start orientation is the zero quaternion: expected a rotation '
+                           'about z carrying yaw = shoulder + elbow')
+    x, y, z, w = (v / norm for v in values)
+    if math.hypot(x, y) > 1e-3:
+        raise RequestError(f'start orientation [{x:.3f}, {y:.3f}, {z:.3f}, {w:.3f}] is not a '
+                           'rotation about z: the arm moves in the x-y plane')
+    return 2.0 * math.atan2(z, w)
+
+
+def quaternion_from_yaw(yaw: float) -> Quaternion:
+    return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+
+
+class PlannerNode(Node):
+
+    def __init__(self):
+        super().__init__('planner')
+        params = declare_parameters(self, 'planner')
+        self.arm = ArmConfig.from_parameters(params)
+        self.config = PlannerConfig.from_parameters(params)
+        began = time.monotonic()
+        self.planner = Planner(self.arm, self.config)
+        self.build_s = time.monotonic() - began
+        self.kinematics = self.planner.kinematics
+        self.counts = {'plans': 0, 'no plan': 0, 'rejected requests': 0}
+        self.last_message = 'no request yet'
+        self.last_ok = True
+        self.last_latency_s = math.nan
+
+        self.path_pub = self.create_publisher(Path, 'planned_path', LATCHED)
+        self.map_pub = self.create_publisher(OccupancyGrid, 'cspace_map', LATCHED)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_service(GetPlan, 'plan_path', self.on_plan_path)
+        self.create_timer(1.0, self.publish_diagnostics)
+        self.map_pub.publish(self.cspace_map())
+        grid = self.planner.grid
+        self.get_logger().info(
+            f'configuration space: {grid.shoulder.count} x {grid.elbow.count} cells of '
+            f'{math.degrees(grid.resolution_rad):.2f} deg, {100 * grid.free.mean():.0f}% free, '
+            f'{len(self.arm.world.regions)} forbidden regions; built in {self.build_s:.2f} s')
+
+    # plan_path
+
+    def on_plan_path(self, request, response):
+        response.plan = Path()
+        response.plan.header.frame_id = FRAME
+        response.plan.header.stamp = self.get_clock().now().to_msg()
+        try:
+            return self.answer(request, response)
+        except Exception as error:                     # never let a request stop the node
+            self.last_ok = False
+            self.last_message = f'plan_path failed unexpectedly: {error!r}'
+            self.get_logger().error(f'{self.last_message}; answering with an empty path')
+            response.plan.poses = []
+            return response
+
+    def answer(self, request, response):
+        began = time.monotonic()
+        try:
+            start_q = self.start_configuration(request.start)
+            goal_xy = self.goal_point(request.goal)
+        except RequestError as error:
+            self.counts['rejected requests'] += 1
+            self.last_ok = False
+            self.last_message = f'rejected a plan_path request: {error}'
+            self.get_logger().warning(f'{self.last_message}; answering with an empty path',
+                                      throttle_duration_sec=1.0)
+            return response
+        plan = self.planner.plan(start_q, goal_xy)
+        self.last_latency_s = time.monotonic() - began
+        goal_text = f'({goal_xy[0]:.3f}, {goal_xy[1]:.3f}) m'
+        if not plan.ok:
+            self.counts['no plan'] += 1
+            self.last_ok = False
+            self.last_message = (f'no plan: {plan.reason}' if goal_text in plan.reason
+                                 else f'no plan to {goal_text}: {plan.reason}')
+            self.get_logger().warning(self.last_message)
+            return response
+        self.counts['plans'] += 1
+        self.last_ok = True
+        response.plan.poses = [self.pose_stamped(pose, response.plan.header)
+                               for pose in poses_from_waypoints(self.kinematics,
+                                                                plan.waypoints_rad)]
+        self.path_pub.publish(response.plan)
+        self.last_message = (f'planned to {goal_text}: {len(plan.waypoints_rad)} waypoints, '
+                             f'{math.degrees(plan.cost_rad):.1f} deg of joint travel')
+        escape = self.planner.forbidden.why_forbidden(plan.waypoints_rad[0])
+        if escape is not None:
+            self.last_message += f'; the start is in forbidden space ({escape}), so the ' \
+                'path first takes the shortest way out'
+        self.get_logger().info(f'{self.last_message} ({1000 * self.last_latency_s:.1f} ms)')
+        return response
+
+    def check_frame(self, header, what: str) -> None:
+        if header.frame_id not in ('', FRAME):
+            raise RequestError(f"{what} is in frame '{header.frame_id}', expected '{FRAME}' "
+                               '(there is no TF here to transform it)')
+
+    def start_configuration(self, start: PoseStamped) -> np.ndarray:
+        """The joint configuration whose tool pose is ``start``, in the joints' travel."""
+        self.check_frame(start.header, 'the start')
+        position = start.pose.position
+        x, y, z = position.x, position.y, position.z
+        if not all(math.isfinite(v) for v in (x, y, z)):
+            raise RequestError(f'start position ({x}, {y}, {z}) is not finite')
+        yaw = yaw_from_quaternion(start.pose.orientation)
+        q = self.kinematics.configuration_from_pose(x, y, yaw)
+        x_check, y_check = self.kinematics.forward(q)
+        if math.hypot(x_check - x, y_check - y) > POSE_TOLERANCE_M:
+            x_elbow = x - self.kinematics.fore_m * math.cos(yaw)
+            y_elbow = y - self.kinematics.fore_m * math.sin(yaw)
+            raise RequestError(
+                f'start pose (x {x:.3f} m, y {y:.3f} m, yaw {math.degrees(yaw):.1f} deg) is not '
+                f'a pose of this arm: its elbow would be {math.hypot(x_elbow, y_elbow):.3f} m '
+                f'from the shoulder, the upper arm is {self.kinematics.upper_m:.3f} m long')
+        return np.array(q)
+
+    def goal_point(self, goal: PoseStamped) -> tuple[float, float]:
+        self.check_frame(goal.header, 'the goal')
+        position = goal.pose.position
+        x, y, z = position.x, position.y, position.z
+        if not all(math.isfinite(v) for v in (x, y, z)):
+            raise RequestError(f'goal position ({x}, {y}, {z}) is not finite')
+        if abs(z) > PLANAR_TOLERANCE_M:
+            raise RequestError(f'goal z = {z:.4f} m: the arm moves in the plane z = 0')
+        return x, y
+
+    def pose_stamped(self, pose, header) -> PoseStamped:
+        x, y, yaw = pose
+        msg = PoseStamped(header=header)
+        msg.pose.position.x, msg.pose.position.y = x, y
+        msg.pose.orientation = quaternion_from_yaw(yaw)
+        return msg
+
+    # cspace_map and diagnostics
+
+    def cspace_map(self) -> OccupancyGrid:
+        grid = self.planner.grid
+        msg = OccupancyGrid()
+        msg.header.frame_id = CSPACE_FRAME
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.info.map_load_time = msg.header.stamp
+        msg.info.resolution = float(grid.resolution_rad)
+        msg.info.width = grid.shoulder.count
+        msg.info.height = grid.elbow.count
+        msg.info.origin.position.x = grid.shoulder.first_rad - 0.5 * grid.resolution_rad
+        msg.info.origin.position.y = grid.elbow.first_rad - 0.5 * grid.resolution_rad
+        msg.info.origin.orientation.w = 1.0
+        # Row j (elbow) holds the shoulder cells i: data[j * width + i].
+        msg.data = np.where(grid.free.T, 0, 100).astype(np.int8).ravel().tolist()
+        return msg
+
+    def publish_diagnostics(self) -> None:
+        grid = self.planner.grid
+        level = DiagnosticStatus.OK if self.last_ok else DiagnosticStatus.WARN
+        diagnostic = DiagnosticArray()
+        diagnostic.header.stamp = self.get_clock().now().to_msg()
+        diagnostic.status = [status(self, level, self.last_message, {
+            **self.counts,
+            'last query (ms)': f'{1000 * self.last_latency_s:.1f}',
+            'grid cells (shoulder x elbow)': f'{grid.shoulder.count} x {grid.elbow.count}',
+            'grid resolution (deg)': f'{math.degrees(grid.resolution_rad):.3f}',
+            'free fraction': f'{grid.free.mean():.3f}',
+            'blocked grid edges found': grid.blocked_edges,
+            'build time (s)': f'{self.build_s:.3f}',
+        })]
+        self.diagnostics_pub.publish(diagnostic)
+
+
+def main(args=None):
+    sys.exit(run(PlannerNode, args))
+
+
+if __name__ == '__main__':
+    main()
