@@ -1,6 +1,7 @@
 """Recordings round-trip through their files; the run plot shows what was recorded."""
 
 import math
+from pathlib import Path
 
 from matplotlib import image
 import numpy as np
@@ -10,6 +11,7 @@ from arm_control.visual.plots import main, plot_run, state_spans, tracking_error
 from arm_control.visual.recording import Recording, Sample
 from arm_control.visual.scene import state_colour
 
+ROOT = Path(__file__).resolve().parents[1]
 STATES = ((0.0, 'waiting'), (0.5, 'planning'), (0.55, 'tracking'), (2.0, 'holding'))
 
 
@@ -110,3 +112,20 @@ def test_command_line_plots_a_recorded_file(tmp_path, capsys):
     assert main([str(tmp_path / 'run.npz')]) == 0
     assert (tmp_path / 'run.png').is_file()
     assert '3.0 s' in capsys.readouterr().out
+
+
+def test_a_closed_loop_run_in_process_is_recorded_and_plotted(tmp_path):
+    """The code path of the README's plot: controller, planner and plant in one process."""
+    from arm_control.visual.demo import closed_loop_run, telling_frame
+    run = closed_loop_run(ROOT / 'config' / 'arm.yaml', ['mid_score'], duration_s=6.0)
+    (name, x, y, reached_s), = run.goals
+    assert name == 'mid_score' and 0.0 < reached_s < 5.0
+    recording = Recording.from_samples(run.samples)
+    truth = recording.arrays('truth')
+    assert truth['time_s'][-1] == pytest.approx(reached_s + 1.0, abs=0.03)
+    states = list(recording.arrays('state')['name'])
+    assert 'tracking' in states and states[-1] == 'holding'
+    assert np.all(np.abs(recording.arrays('voltage')['value']) <= 12.0)
+    figure = plot_run(recording, tmp_path / 'run.png')
+    assert figure.axes[1].lines                  # a tracking error was drawn
+    assert telling_frame(run).state == 'tracking'

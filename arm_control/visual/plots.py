@@ -73,7 +73,7 @@ def plot_run(recording: Recording, path=None, *, title: str = '', max_voltage: f
                           color=colour, linewidth=1.4, linestyle='--',
                           label=f'{label} setpoint')
     angle_ax.set_ylabel('angle (deg)')
-    angle_ax.legend(loc='upper right', fontsize=7, ncol=2)
+    angle_ax.legend(loc='best', fontsize=7, ncol=2)
 
     # Tracking error: against the true angle where the sim gave it, else the sensors.
     actual, against = (truth, 'true') if len(truth['time_s']) >= 2 else (measured, 'measured')
@@ -83,7 +83,7 @@ def plot_run(recording: Recording, path=None, *, title: str = '', max_voltage: f
             error_ax.plot(times - start, np.degrees(error[:, k]), color=JOINT_COLOURS[k],
                           linewidth=1.0, label=JOINT_LABELS[k])
         error_ax.axhline(0.0, color='#868e96', linewidth=0.6)
-        error_ax.legend(loc='upper right', fontsize=7)
+        error_ax.legend(loc='best', fontsize=7)
     else:
         error_ax.text(0.5, 0.5, 'no setpoint recorded', transform=error_ax.transAxes,
                       ha='center', va='center', color='#868e96')
@@ -93,7 +93,7 @@ def plot_run(recording: Recording, path=None, *, title: str = '', max_voltage: f
         for k in range(2):
             voltage_ax.step(voltage['time_s'] - start, voltage['value'][:, k], where='post',
                             color=JOINT_COLOURS[k], linewidth=1.0, label=JOINT_LABELS[k])
-        voltage_ax.legend(loc='upper right', fontsize=7)
+        voltage_ax.legend(loc='best', fontsize=7)
     for limit in (-max_voltage, max_voltage):
         voltage_ax.axhline(limit, color='#c92a2a', linewidth=0.8, linestyle=':')
     voltage_ax.set_ylim(-1.15 * max_voltage, 1.15 * max_voltage)

@@ -242,9 +242,12 @@ class SceneView:
                     linewidth=1.2, zorder=3))
             label_x = (max(region.x_min, x_min) + min(region.x_max, x_max)) / 2
             label_y = (max(region.y_min, y_min) + min(region.y_max, y_max)) / 2
+            visible_width = min(region.x_max, x_max) - max(region.x_min, x_min)
+            visible_height = min(region.y_max, y_max) - max(region.y_min, y_min)
             if x_min < label_x < x_max and y_min < label_y < y_max:
                 ax.text(label_x, label_y, region.name, ha='center', va='center', fontsize=8,
-                        style='italic', color='#343a40', zorder=4, clip_on=True)
+                        style='italic', color='#343a40', zorder=4, clip_on=True,
+                        rotation=90 if visible_height > 2 * visible_width else 0)
 
     def set_cspace(self, image: CSpaceImage) -> None:
         """Show this configuration space (e.g. the planner's ``cspace_map``)."""
@@ -294,7 +297,8 @@ class SceneView:
                                   va='top', fontsize=9, color='#343a40', zorder=15)
         self._info_text = ax.text(0.015, 0.975, '', transform=ax.transAxes, ha='left',
                                   va='top', fontsize=8.5, family='monospace', color='#343a40',
-                                  zorder=15)
+                                  zorder=15, bbox=dict(facecolor='white', alpha=0.75,
+                                                       edgecolor='none', pad=2.0))
         (self._cs_path,) = cs.plot([], [], color=PATH_COLOUR, linewidth=1.5, zorder=2)
         (self._cs_goals,) = cs.plot([], [], 'o', markerfacecolor='none', markersize=6,
                                     markeredgecolor=GOAL_COLOUR, markeredgewidth=1.5, zorder=3)
