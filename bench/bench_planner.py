@@ -12,6 +12,7 @@ from a freshly built planner, so the lazy edge checks are paid as in a fresh nod
 """
 
 import math
+import os
 from pathlib import Path
 import statistics
 import sys
@@ -62,7 +63,8 @@ def main():
     pairs = queries(reference, 10 if quick else 40, np.random.default_rng(SEED))
     heap_pairs = pairs[:5 if quick else 15]
     print(f'FRC robot, {len(pairs)} seeded queries that need a search (heapq: the first '
-          f'{len(heap_pairs)}); check step {math.degrees(base.check_step_rad):.2f} deg\n')
+          f'{len(heap_pairs)}); check step {math.degrees(base.check_step_rad):.2f} deg; '
+          f'load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores\n')
     print('| grid | cells | start-up (lazy edges) | + every edge checked | search | '
           'queries planned | median | p95 | max |')
     print('|---|---|---|---|---|---|---|---|---|')

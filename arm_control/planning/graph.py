@@ -120,7 +120,7 @@ class ConfigurationGrid:
             i_to, j_to = (i + d_s).ravel(), (j + d_e).ravel()
             inside = (i_to >= 0) & (i_to < n_s) & (j_to >= 0) & (j_to < n_e)
             to = np.where(inside, i_to * n_e + j_to, node)
-            usable = inside & free & free[np.where(inside, to, node)]
+            usable = inside & free & free[to]
             indices[:, k] = np.where(usable, to, node)
             step = self.resolution_rad * np.array([abs(d_s), abs(d_e)])
             weights[:, k] = step.sum() + TIE_BREAK * math.hypot(*step)

@@ -24,8 +24,12 @@ from arm_control.planning.graph import ConfigurationGrid, path_to, segments_free
 MAX_SEARCHES = 50
 # A segment is first sampled this many times more coarsely: most blocked ones fail there.
 COARSE_FACTOR = 10
-# Shortcut candidates that pass the coarse check are checked finely, farthest first, this many.
+# Shortcut candidates that pass the coarse check are checked finely, farthest first, this
+# many, each first at a step this many times coarser (a grazing segment fails there).
 MAX_FINE_CHECKS = 3
+MIDDLE_FACTOR = 3
+# At most this many corners ahead are tried from each kept waypoint.
+MAX_CANDIDATES = 12
 BRANCH_NAMES = ('elbow-positive', 'elbow-negative')
 
 
@@ -101,13 +105,12 @@ class Planner:
             branches = self.kinematics.inverse(*goal_xy)
         except UnreachableError as error:
             return Plan.failure(f'the goal is out of reach: {error}')
-        goals, refusals = [], []
-        for name, q in zip(BRANCH_NAMES, branches):
-            goal, why = self._goal(q)
-            if why is None:
-                goals.append(goal)
-            else:
-                refusals.append(f'{name} branch {_degrees(q)}: {why}')
+        candidates = [self._in_travel(q) for q in branches]
+        free = self.forbidden.is_free(np.array(candidates))
+        goals = [goal for goal, ok in zip(candidates, free) if ok]
+        refusals = [f'{name} branch {_degrees(q)}: {self.forbidden.why_forbidden(goal)}'
+                    for name, q, goal, ok in zip(BRANCH_NAMES, branches, candidates, free)
+                    if not ok]
         if not goals:
             return Plan.failure(
                 f'the goal ({goal_xy[0]:.3f}, {goal_xy[1]:.3f}) m is forbidden on both elbow '
@@ -152,11 +155,12 @@ class Planner:
 
     # Search
 
-    def segment_is_free(self, q_from, q_to) -> bool:
-        """``ForbiddenSpace.segment_is_free`` at ``check_step_rad``, after a coarse pass that
-        rejects most blocked segments cheaply (a forbidden sample is forbidden at any step)."""
+    def segment_is_free(self, q_from, q_to, coarse_factor: float = COARSE_FACTOR) -> bool:
+        """``ForbiddenSpace.segment_is_free`` at ``check_step_rad``, after a pass at a
+        ``coarse_factor`` times coarser step that rejects most blocked segments for a
+        fraction of the cost (a forbidden sample is forbidden at any step)."""
         step = self.config.check_step_rad
-        coarse = self.forbidden.segment_is_free(q_from, q_to, COARSE_FACTOR * step)
+        coarse = self.forbidden.segment_is_free(q_from, q_to, coarse_factor * step)
         return coarse and self.forbidden.segment_is_free(q_from, q_to, step)
 
     def _search(self, start: np.ndarray, goals: list[np.ndarray]) -> Plan:
@@ -236,10 +240,11 @@ class Planner:
     def _shortcut(self, path: np.ndarray) -> np.ndarray | None:
         """Drop the waypoints a checked straight segment can skip.
 
-        From each kept waypoint, jump to the farthest corner of the grid path in sight: all
-        corners ahead are tried at once at a coarse step (a forbidden sample is forbidden at
-        any step), then the farthest that passed is checked with
-        ``ForbiddenSpace.segment_is_free`` at ``check_step_rad``. With none in sight, the next
+        From each kept waypoint, jump to the farthest corner of the grid path in sight: the
+        corners ahead (up to ``MAX_CANDIDATES``, evenly spread) are tried at once at a coarse
+        step (a forbidden sample is forbidden at any step), then the farthest that passed is
+        checked with ``ForbiddenSpace.segment_is_free`` at ``check_step_rad``, after a pass
+        at ``MIDDLE_FACTOR`` times that step. With none in sight, the next
         grid step (checked when the grid path was found) is kept.
         """
         step = self.config.check_step_rad
@@ -251,11 +256,13 @@ class Planner:
         while kept[-1] < last:
             anchor = kept[-1]
             ahead = corners[corners > anchor + 1]
+            if len(ahead) > MAX_CANDIDATES:               # evenly spread, the last included
+                ahead = ahead[np.linspace(0, len(ahead) - 1, MAX_CANDIDATES).round().astype(int)]
             in_sight = ahead[segments_free(self.forbidden, np.broadcast_to(path[anchor], (
                 len(ahead), 2)), path[ahead], COARSE_FACTOR * step)]
             chosen = anchor + 1
             for corner in in_sight[::-1][:MAX_FINE_CHECKS]:
-                if self.forbidden.segment_is_free(path[anchor], path[corner], step):
+                if self.segment_is_free(path[anchor], path[corner], MIDDLE_FACTOR):
                     chosen = int(corner)
                     break
             if chosen == anchor + 1:
