@@ -106,7 +106,8 @@ def test_state_colours_by_name():
     assert state_colour('E-STOPPED') == state_colour('estop') == state_colour('e_stopped')
     assert state_colour('tracking') == state_colour('TRACKING')
     assert state_colour('finished') == state_colour('holding')
-    names = ('waiting', 'tracking', 'holding', 'error', 'estopped', 'disabled', 'driver')
+    names = ('waiting', 'tracking', 'holding', 'error', 'estopped', 'disabled', 'driver',
+             'no_sensors')
     assert len({state_colour(name) for name in names}) == len(names)
     assert state_colour('') == state_colour('something new') == scene_module.UNKNOWN_STATE_COLOUR
 

@@ -28,6 +28,7 @@ STATE_COLOURS = (
     ('estop', '#e03131'), ('emergency', '#e03131'),     # red: stopped hard, needs a reset
     ('error', '#f08c00'), ('fault', '#f08c00'), ('reject', '#f08c00'),
     ('disabl', '#adb5bd'),
+    ('sensor', '#868e96'),                              # no sensors: nothing to close a loop on
     ('driver', '#9c36b5'), ('velocity', '#9c36b5'), ('manual', '#9c36b5'),
     ('track', '#1971c2'), ('mov', '#1971c2'), ('plan', '#1971c2'),
     ('hold', '#2f9e44'), ('finish', '#2f9e44'), ('done', '#2f9e44'), ('reach', '#2f9e44'),
