@@ -77,7 +77,8 @@ class ViewerNode(Node):
 
         if self.headless:
             self.create_timer(1.0 / self.config.png_rate_hz, self.write_png)
-            self.get_logger().info(f'headless: writing {self.config.png_path} '
+            why = '' if self.config.headless or have_display() else ' (no DISPLAY)'
+            self.get_logger().info(f'headless{why}: writing {self.config.png_path} '
                                    f'{self.config.png_rate_hz:g} times a second')
         else:
             self.view.start_live()
