@@ -27,6 +27,7 @@ setup(
             'sim = arm_control.nodes.sim:main',
             'controller = arm_control.nodes.controller:main',
             'planner = arm_control.nodes.planner:main',
+            'tour = arm_control.nodes.tour:main',
             'viewer = arm_control.nodes.viewer:main',
             'markers = arm_control.nodes.markers:main',
             'recorder = arm_control.nodes.recorder:main',

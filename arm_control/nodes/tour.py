@@ -1,0 +1,108 @@
+"""The ``tour`` node: visits goals one by one and reports how each move went.
+
+Publishes each goal as a ``goal_point`` (PointStamped in arm_base), waits for the controller's
+``arm_state`` to settle in ``holding`` (or to refuse the goal), and logs the move time and the
+final error measured on ``/sim/ground_truth``. It is the demonstration the README's first
+command runs; with ROS installed, ``ros2 run arm_control tour`` does the same.
+"""
+
+import math
+import sys
+import time
+
+from geometry_msgs.msg import PointStamped
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from arm_control.config import ArmConfig, ParameterError
+from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, STATE_STREAM
+
+FINISHED, REFUSED = 'holding', ('error', 'estopped', 'disabled')
+
+
+class TourNode(Node):
+
+    def __init__(self):
+        super().__init__('tour')
+        params = declare_parameters(self, 'tour')
+        self.arm = ArmConfig.from_parameters(params)
+        self.kinematics = TwoLinkKinematics(self.arm.shoulder.length_m, self.arm.elbow.length_m)
+        names = [n for n in params['goals'] if n]
+        presets = {name: (x, y) for name, x, y in self.arm.presets}
+        unknown = [n for n in names if n not in presets]
+        if unknown:
+            raise ParameterError(f"parameter 'goals' = {names}: {unknown} are not presets "
+                                 f'{list(presets)}')
+        self.goals = [(name, presets[name]) for name in names]
+        self.loops = int(params['loops'])
+        self.goal_timeout_s = float(params['goal_timeout_s'])
+        self.state = ''
+        self.true_q = None
+        self.results = []
+        self.index, self.loop = -1, 0
+        self.sent_at = None
+        self.left_start_state = False
+        self.goal_pub = self.create_publisher(PointStamped, 'goal_point', COMMANDS)
+        self.create_subscription(String, 'arm_state', self.on_state, LATCHED)
+        self.create_subscription(JointState, 'sim/ground_truth', self.on_truth, STATE_STREAM)
+        self.create_timer(0.05, self.tick)
+
+    def on_state(self, msg: String) -> None:
+        if msg.data != self.state:
+            self.left_start_state = True
+        self.state = msg.data
+
+    def on_truth(self, msg: JointState) -> None:
+        if len(msg.position) == 2:
+            self.true_q = tuple(msg.position)
+
+    def tick(self) -> None:
+        if self.true_q is None or self.state in ('', 'no_sensors'):
+            return                                   # the arm is not up yet
+        if self.sent_at is None:
+            self.send_next()
+            return
+        elapsed = time.monotonic() - self.sent_at
+        name, goal = self.goals[self.index]
+        if self.left_start_state and self.state == FINISHED:
+            x, y = self.kinematics.forward(self.true_q)
+            error_mm = 1000.0 * math.hypot(x - goal[0], y - goal[1])
+            self.report(name, goal, f'reached in {elapsed:.2f} s, final error {error_mm:.1f} mm')
+        elif self.left_start_state and self.state in REFUSED:
+            self.report(name, goal, f'not reached: controller went to {self.state}')
+        elif elapsed > self.goal_timeout_s:
+            self.report(name, goal, f'not reached within {self.goal_timeout_s:g} s')
+
+    def report(self, name, goal, outcome: str) -> None:
+        line = f'{name:>14} ({goal[0]:+.2f}, {goal[1]:+.2f}) m: {outcome}'
+        self.results.append(line)
+        self.get_logger().info(line)
+        self.send_next()
+
+    def send_next(self) -> None:
+        self.index += 1
+        if self.index == len(self.goals):
+            self.index, self.loop = 0, self.loop + 1
+            if self.loops and self.loop >= self.loops:
+                self.get_logger().info('tour finished:\n' + '\n'.join(self.results))
+                self.context.try_shutdown()          # ends spin(); main() cleans up
+                return
+        name, (x, y) = self.goals[self.index]
+        msg = PointStamped()
+        msg.header.frame_id = 'arm_base'
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.point.x, msg.point.y = float(x), float(y)
+        self.left_start_state = False
+        self.goal_pub.publish(msg)
+        self.sent_at = time.monotonic()
+        self.get_logger().info(f'goal {name}: ({x:+.2f}, {y:+.2f}) m')
+
+
+def main(args=None):
+    sys.exit(run(TourNode, args))
+
+
+if __name__ == '__main__':
+    main()
