@@ -125,6 +125,30 @@ class HoldTrajectory:
         return self.q.copy(), np.zeros(2), np.zeros(2)
 
 
+class ChainedTrajectory:
+    """Trajectories one after another, each starting where and when the last one ends."""
+
+    def __init__(self, parts):
+        self.parts = list(parts)
+        self.offsets_s = np.concatenate([[0.0], np.cumsum([p.duration_s for p in self.parts])])
+        self.duration_s = float(self.offsets_s[-1])
+
+    def sample(self, t_s):
+        index = int(np.clip(np.searchsorted(self.offsets_s, t_s, side='right') - 1,
+                            0, len(self.parts) - 1))
+        return self.parts[index].sample(t_s - self.offsets_s[index])
+
+
+class _Anywhere:
+    """Free space everywhere: for timing the way out of forbidden space, which the arm is
+    already in (the planner's first leg from a start pushed there)."""
+
+    def is_free(self, q):
+        q = np.asarray(q, float)
+        free = np.ones(q.shape[:-1], dtype=bool)
+        return bool(free) if free.ndim == 0 else free
+
+
 class Motion:
     """A trajectory pinned to the clock: it takes over at ``begin_s`` and is at rest from
     ``end_s`` on, at ``final_q``."""
@@ -270,11 +294,13 @@ class ArmController:
         self.goal_q: Optional[np.ndarray] = None     # where the current trajectory ends
         self.arrived_s = -math.inf
         self.last_timed_plan: Optional[TimedPlan] = None
+        self.planner_note = ''          # said with a planner timeout, e.g. service not up
 
         self.last_step_s: Optional[float] = None
         self.estimate_time_s: Optional[float] = None
         self.last_reading_s = -math.inf
         self.last_potentiometer: Optional[np.ndarray] = None
+        self.jumped = False             # the filter re-initialised: the arm is elsewhere
         self.voltage = np.zeros(2)
         self.feedforward_v = np.zeros(2)
         self.feedback_v = np.zeros(2)
@@ -473,10 +499,20 @@ class ArmController:
         if math.dist(end_xy, request.goal.xy) > PLAN_GOAL_TOLERANCE_M:
             return None, (f'the plan to {request.goal.label} ends at ({end_xy[0]:.3f}, '
                           f'{end_xy[1]:.3f}) m, not at the goal')
-        if len(waypoints) > 1 and not self.forbidden.path_is_free(waypoints, CHECK_STEP_RAD):
+        escape = len(waypoints) > 2 and not self.forbidden.is_free(start)
+        if escape:      # the arm is in forbidden space: the planner's first leg takes it out
+            out, rest = waypoints[:2], waypoints[1:]
+        else:
+            out, rest = None, waypoints
+        if len(rest) > 1 and not self.forbidden.path_is_free(rest, CHECK_STEP_RAD):
             return None, f'the plan to {request.goal.label} enters forbidden space: refused'
-        return time_optimal_trajectory(waypoints, self.dynamics, self.forbidden, self.limits,
-                                       start_velocity_rad_s=request.start_velocity_rad_s), ''
+        if out is None:
+            return time_optimal_trajectory(rest, self.dynamics, self.forbidden, self.limits,
+                                           start_velocity_rad_s=request.start_velocity_rad_s), ''
+        first = time_optimal_trajectory(out, self.dynamics, _Anywhere(), self.limits,
+                                        start_velocity_rad_s=request.start_velocity_rad_s)
+        second = time_optimal_trajectory(rest, self.dynamics, self.forbidden, self.limits)
+        return ChainedTrajectory([first, second]), ''
 
     def plan_directly(self, request: PlanRequest) -> TimedPlan:
         """Plan and time ``request`` with the ``planner`` given to the core.
@@ -585,7 +621,9 @@ class ArmController:
             if taken_s > self.estimate_time_s:
                 self.estimator.predict(self.voltage, taken_s - self.estimate_time_s)
                 self.estimate_time_s = taken_s
+            resets = self.estimator.jump_count
             self.estimator.update(pot, velocity, encoder)
+            self.jumped |= self.estimator.jump_count > resets
         if now_s > self.estimate_time_s:
             self.estimator.predict(self.voltage, now_s - self.estimate_time_s)
             self.estimate_time_s = now_s
@@ -606,12 +644,20 @@ class ArmController:
             self._hold_at_estimate(now_s)
             self._say(now_s, 'info', 'joint states arriving: holding at the current position')
         if self.state in ZERO_VOLTS:
+            self.jumped = False
             return
         if self.last_potentiometer is not None and self._past_a_limit(now_s):
             return
+        if self.jumped:
+            self.jumped = False
+            q_sp = self._reference(now_s)[0]
+            if np.max(np.abs(self.estimator.state[:2] - q_sp)) > \
+                    self.config.tracking_error_limit_rad:
+                self._moved(now_s)      # a small jump the PID takes back; a large one, not
         if self.pending is not None and now_s > self.goal_deadline_s:
+            note = f' ({self.planner_note})' if self.planner_note else ''
             self._goal_failed(now_s, f'the planner did not answer within '
-                                     f'{self.config.planner_timeout_s:g} s')
+                                     f'{self.config.planner_timeout_s:g} s{note}')
         self.timeline.prune(now_s)
         if self.state == ArmState.TRACKING and self._arrived(now_s):
             self._arrive(now_s)
@@ -624,6 +670,20 @@ class ArmController:
             goal = self.queue.popleft()
             self.queue_version += 1
             self._start_goal(now_s, goal)
+
+    def _moved(self, now_s: float) -> None:
+        """The sensors say the arm is far from where the filter had it (pushed, the sim
+        reset): hold where it is now; an interrupted goal is planned again from there."""
+        self.pending, self._outbox = None, []
+        if self.current_goal is not None:
+            self.queue.appendleft(self.current_goal)
+            self.current_goal = None
+            self.queue_version += 1
+        self._fire(Trigger.MOVED)
+        self._hold_at_estimate(now_s)
+        q = np.degrees(self.estimator.state[:2])
+        self._say(now_s, 'warning', f'the arm is not where it was (moved, or the sim reset): '
+                                    f'holding at ({q[0]:.1f}, {q[1]:.1f}) deg')
 
     def _arrived(self, now_s: float) -> bool:
         """Done moving, both joints within tolerance of the goal and nearly still."""

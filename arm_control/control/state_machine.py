@@ -47,6 +47,7 @@ class Trigger(str, Enum):
     ENABLE = 'enable'
     DRIVER_COMMAND = 'driver_command'
     DRIVER_IDLE = 'driver_idle'        # driver commands stopped and the arm is still
+    MOVED = 'moved'                    # the sensors jumped: the arm was moved, the sim reset
 
     def __str__(self) -> str:
         return self.value
@@ -97,10 +98,11 @@ TRANSITIONS: dict[tuple[ArmState, Trigger], ArmState] = {
     (S.DISABLED, T.CANCEL): S.DISABLED,
     (S.DISABLED, T.ESTOP): S.ESTOPPED,
 }
-# From every state that commands the motors: e-stop, disable, losing the sensors, and a
-# driver taking over.
+# From every state that commands the motors: e-stop, disable, losing the sensors, the arm
+# found elsewhere (hold there, then replan), and a driver taking over.
 for _state in COMMANDING:
     TRANSITIONS[(_state, T.ESTOP)] = S.ESTOPPED
+    TRANSITIONS[(_state, T.MOVED)] = S.WAITING
     TRANSITIONS[(_state, T.DISABLE)] = S.DISABLED
     TRANSITIONS[(_state, T.SENSORS_LOST)] = S.NO_SENSORS
     if _state != S.DRIVER:

@@ -1,0 +1,179 @@
+"""sim, planner and controller as separate installed processes; goals from a third (the probe).
+
+Every check of where the arm went is made on the sim's true state (``/sim/ground_truth``),
+which the controller never sees.
+"""
+
+import dataclasses
+import math
+
+from geometry_msgs.msg import PointStamped
+from nav_msgs.srv import GetPlan
+import numpy as np
+import pytest
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+from std_srvs.srv import SetBool, Trigger
+
+from arm_control import config
+from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.nodes.common import COMMANDS, LATCHED
+from arm_control.planning.cspace import ForbiddenSpace
+
+SETTLE_TIMEOUT_S = 40.0
+
+
+@pytest.fixture
+def probe(probe):
+    probe.processes = {}
+    return probe
+
+
+def start_arm(launch, probe, *ros_args):
+    """sim, planner and controller; returns (truth, states, events) lists being filled."""
+    for name in ('sim', 'planner', 'controller'):
+        probe.processes[name] = launch(name, *ros_args)
+    truth = probe.collect(JointState, '/sim/ground_truth')
+    states = probe.collect(String, '/arm_state', LATCHED)
+    events = probe.collect(String, '/controller/events', 50)
+    client = probe.node.create_client(GetPlan, '/plan_path')
+    assert probe.spin_until(lambda: client.service_is_ready() and states
+                            and states[-1].data == 'waiting', 30.0), \
+        f'not ready: arm_state {[s.data for s in states]}, planner {client.service_is_ready()}'
+    # The arm fell while the controller was starting: put it back, and watch from there on.
+    assert probe.call(Trigger, '/sim/reset', Trigger.Request()).success
+    start = np.array(config.load('sim')[1].initial_position)
+
+    def held_at_start():
+        recent = truth[-25:]
+        return len(recent) == 25 and all(
+            np.max(np.abs(np.array(m.position) - start)) < math.radians(2.0) for m in recent)
+    assert probe.spin_until(held_at_start, 10.0), 'the controller did not take over the arm'
+    truth.clear()
+    return truth, states, events
+
+
+def goal_publisher(probe):
+    publisher = probe.node.create_publisher(PointStamped, '/goal_point', COMMANDS)
+    assert probe.spin_until(lambda: publisher.get_subscription_count() > 0, 10.0)
+
+    def send(x, y, z=0.0, frame='arm_base'):
+        message = PointStamped()
+        message.header.frame_id = frame
+        message.point.x, message.point.y, message.point.z = float(x), float(y), float(z)
+        publisher.publish(message)
+    return send
+
+
+def reached(events):
+    return [e.data for e in events if e.data.startswith('reached')]
+
+
+def tool_track(arm, truth):
+    kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+    q = np.array([m.position for m in truth])
+    qd = np.array([m.velocity for m in truth])
+    xy = np.array([kinematics.forward(row) for row in q])
+    return q, qd, xy
+
+
+def assert_each_goal_reached_and_still(goals, xy, qd, tolerance_m):
+    """For each goal, some true sample put the tool within tolerance with the arm still."""
+    still = np.all(np.abs(qd) < 0.1, axis=1)
+    for goal in goals:
+        closest = np.min(np.where(still, np.linalg.norm(xy - np.array(goal), axis=1), np.inf))
+        assert closest < tolerance_m, f'goal {goal}: closest still approach {closest:.4f} m'
+
+
+def test_goals_reached_in_order_never_below_the_floor(launch, probe, arm):
+    truth, states, events = start_arm(launch, probe)
+    send = goal_publisher(probe)
+    send(math.nan, 1.0)                                   # rejected, with the reason
+    send(1.0, 1.0, frame='map')
+    said = lambda words: any(words in e.data for e in events)  # noqa: E731
+    assert probe.spin_until(lambda: said('not a finite number') and said("'map'"), 10.0)
+    assert probe.spin_until(lambda: states[-1].data == 'error', 5.0)
+
+    # Front to back over the top, near full extension close to the floor, a tall reach.
+    goals = [(-1.0, 1.0), (1.6, 0.12), (0.4, 1.7), (1.1, 0.9)]
+    for goal in goals:
+        send(*goal)
+    assert probe.spin_until(lambda: len(reached(events)) == len(goals), SETTLE_TIMEOUT_S), \
+        [e.data for e in events]
+    probe.spin_for(0.5)
+
+    q, qd, xy = tool_track(arm, truth)
+    # Within tolerance: 1 deg on each joint moves the tool at most (La + Lb)·1 deg = 3.1 cm.
+    assert_each_goal_reached_and_still(goals, xy, qd, 0.031)
+    assert np.linalg.norm(xy[-1] - goals[-1]) < 0.031
+    lowest = ForbiddenSpace(arm).lowest_point_m(q)
+    assert np.min(lowest) >= 0.0, f'a link went {-np.min(lowest) * 1000:.1f} mm below the floor'
+    assert [s.data for s in states][-1] == 'holding'
+    assert 'tracking' in [s.data for s in states]
+
+
+def test_services_estop_reset_cancel_enable(launch, probe, arm):
+    truth, states, events = start_arm(launch, probe)
+    send = goal_publisher(probe)
+    send(-1.0, 1.0)
+    assert probe.spin_until(lambda: states[-1].data == 'tracking', 10.0)
+    response = probe.call(Trigger, '/controller/estop', Trigger.Request())
+    assert response.success and 'E-STOP' in response.message
+    assert probe.spin_until(lambda: states[-1].data == 'estopped', 5.0)
+    send(1.0, 1.0)
+    assert probe.spin_until(lambda: any('e-stopped' in e.data for e in events), 5.0)
+    assert probe.call(Trigger, '/controller/reset', Trigger.Request()).success
+    assert probe.spin_until(lambda: states[-1].data == 'waiting', 5.0)
+    assert not probe.call(Trigger, '/controller/reset', Trigger.Request()).success
+    assert probe.call(SetBool, '/controller/enable', SetBool.Request(data=False)).success
+    assert probe.spin_until(lambda: states[-1].data == 'disabled', 5.0)
+    assert probe.call(SetBool, '/controller/enable', SetBool.Request(data=True)).success
+    assert probe.spin_until(lambda: states[-1].data == 'waiting', 5.0)
+    send(1.1, 0.9)
+    send(0.9, 1.5)
+    assert probe.spin_until(lambda: states[-1].data == 'tracking', 10.0)
+    response = probe.call(Trigger, '/controller/cancel', Trigger.Request())
+    assert response.success and '2 goals dropped' in response.message
+    assert probe.spin_until(lambda: states[-1].data == 'waiting', 5.0)
+
+    voltages = probe.collect(Float64MultiArray, '/voltage_command', COMMANDS)
+    assert probe.spin_until(lambda: len(voltages) > 10, 5.0)
+    assert any(abs(v) > 0.5 for v in voltages[-1].data)     # holding against gravity
+    assert probe.processes['controller'].stop() == 0
+    probe.spin_for(0.3)
+    assert list(voltages[-1].data) == [0.0, 0.0]            # its last word: 0 V
+
+
+@pytest.fixture
+def frc_robot_file():
+    return config.default_parameter_file('frc_robot.yaml')
+
+
+def test_frc_robot_every_move_planned_with_zero_contact(launch, probe, frc_robot_file):
+    """On the competition robot (body, bumpers, intake, extension and height limits) the
+    controller plans every move with the planner; the arm never touches forbidden space."""
+    frc_arm, _ = config.load('controller', frc_robot_file)
+    truth, states, events = start_arm(launch, probe, '--params-file', str(frc_robot_file))
+    presets = probe.node.create_publisher(String, '/goal_preset', COMMANDS)
+    assert probe.spin_until(lambda: presets.get_subscription_count() > 0, 10.0)
+    send = goal_publisher(probe)
+    names = ['floor_pickup', 'back_score', 'high_score', 'stow', 'back_score', 'mid_score']
+    positions = {name: (x, y) for name, x, y in frc_arm.presets}
+    for name in names:
+        send(*positions[name])                             # queued, visited in order
+    assert probe.spin_until(lambda: len(reached(events)) == len(names), 60.0), \
+        [e.data for e in events]
+    presets.publish(String(data='shelf_pickup'))          # a button: replaces, goes now
+    assert probe.spin_until(lambda: len(reached(events)) == len(names) + 1, 15.0)
+    probe.spin_for(0.3)
+
+    q, qd, xy = tool_track(frc_arm, truth)
+    assert_each_goal_reached_and_still([positions[n] for n in names + ['shelf_pickup']],
+                                       xy, qd, 0.031)
+    # The regions themselves (clearance_m is the planner's margin around them).
+    bodies = ForbiddenSpace(dataclasses.replace(
+        frc_arm, world=dataclasses.replace(frc_arm.world, clearance_m=0.0)))
+    contact = ~np.asarray(bodies.is_free(q))
+    assert not np.any(contact), (f'{np.sum(contact)} samples in forbidden space, first: '
+                                 f'{bodies.why_forbidden(q[contact][0])}')
+    assert not any('failed' in e.data for e in events)
