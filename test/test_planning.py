@@ -491,3 +491,22 @@ def test_an_edge_through_a_thin_forbidden_sliver_is_found_and_cut(frc_forbidden)
         assert cost == pytest.approx(expected, rel=2e-5)
         assert frc_forbidden.path_is_free(lazy.configurations[nodes], 0.01)
     assert lazy.blocked_edges > 0
+
+
+def test_a_search_leaves_the_graph_layout_alone(frc_forbidden):
+    """Edge slots are found by position (node · 8 + direction): scipy must not reorder them
+    (the search graph shares its arrays), and each edge costs its joint travel."""
+    grid = ConfigurationGrid(frc_forbidden, 0.1, 0.01)
+    before = grid.indices.copy()
+    source = int(np.flatnonzero(grid.free.ravel())[len(grid.free.ravel()) // 3])
+    distance, predecessor = grid.shortest_paths([source], [0.0])
+    np.testing.assert_array_equal(grid.indices, before)
+    reached = np.flatnonzero(np.isfinite(distance))
+    assert len(reached) > 100
+    for node in reached[::97]:
+        if predecessor[node] == grid.node_count:
+            continue
+        step = grid.configurations[node] - grid.configurations[predecessor[node]]
+        assert np.max(np.abs(step)) == pytest.approx(0.1)
+        assert distance[node] - distance[predecessor[node]] == pytest.approx(
+            np.abs(step).sum(), rel=2e-5)

@@ -37,6 +37,8 @@ DIRECTIONS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 
 TIE_BREAK = 1e-5
 # Samples per batch of collision checks: bounds the memory of one vectorised check.
 CHECK_BATCH = 200_000
+# Edges from the virtual source of a search: the start's connections, (2 · 4)² at most.
+SOURCE_SLOTS = 64
 
 
 @dataclass(frozen=True)
@@ -124,10 +126,21 @@ class ConfigurationGrid:
             indices[:, k] = np.where(usable, to, node)
             step = self.resolution_rad * np.array([abs(d_s), abs(d_e)])
             weights[:, k] = step.sum() + TIE_BREAK * math.hypot(*step)
-        self.indices = indices.ravel()
-        self.weights = weights.ravel()
-        self.indptr = np.arange(0, len(self.indices) + 1, len(DIRECTIONS), dtype=np.int32)
-        self.checked_free = np.zeros(len(self.indices), dtype=bool)
+        # The search graph has one more row, a virtual source, whose SOURCE_SLOTS edges each
+        # query rewrites in place (unused ones loop back to it); no edge leads into it.
+        slots = self.node_count * len(DIRECTIONS)
+        source = self.node_count
+        all_indices = np.full(slots + SOURCE_SLOTS, source, dtype=np.int32)
+        all_weights = np.zeros(slots + SOURCE_SLOTS)
+        all_indices[:slots], all_weights[:slots] = indices.ravel(), weights.ravel()
+        self.indices, self.weights = all_indices[:slots], all_weights[:slots]      # views
+        self._source_indices, self._source_weights = all_indices[slots:], all_weights[slots:]
+        self.indptr = np.arange(0, slots + 1, len(DIRECTIONS), dtype=np.int32)
+        self._search_graph = csr_matrix(
+            (all_weights, all_indices, np.append(self.indptr, slots + SOURCE_SLOTS)),
+            shape=(source + 1, source + 1))
+        assert np.shares_memory(self._search_graph.indices, all_indices)
+        self.checked_free = np.zeros(slots, dtype=bool)
         self.blocked_edges = 0
         self._lists = None
         base = csr_matrix((self.weights, self.indices, self.indptr),
@@ -238,31 +251,38 @@ class ConfigurationGrid:
     # Search
 
     def shortest_path(self, source_nodes, source_costs, target_nodes, target_costs,
-                      method: str = 'scipy', max_searches: int = 50):
+                      method: str = 'scipy', max_searches: int = 50, guess: float = math.inf):
         """The cheapest checked path virtual source → grid → virtual target.
 
         Sources and targets are grid nodes with the cost of joining them (the exact start
-        and goal configurations lie off the grid). Returns (nodes, cost, target index) or
-        None when no path exists; raises RuntimeError past ``max_searches`` re-searches.
+        and goal configurations lie off the grid). ``guess``: a likely bound on the cost;
+        the search first explores only that far (exact when it finds a target: Dijkstra
+        settles nodes in order of distance), then, if it found none, everywhere.
+        Returns (nodes, cost, target index) or None when no path exists; raises
+        RuntimeError past ``max_searches`` re-searches.
         """
         target_nodes = np.asarray(target_nodes, dtype=int)
         target_costs = np.asarray(target_costs, dtype=float)
         if len(target_nodes) == 0 or len(source_nodes) == 0:
             return None
+        limit = guess if method == 'scipy' else math.inf   # heapq stops at the targets
         for _ in range(max_searches):
             distance, predecessor = self.shortest_paths(source_nodes, source_costs, method,
-                                                        target_nodes)
+                                                        target_nodes, limit)
             totals = distance[target_nodes] + target_costs
             best = int(np.argmin(totals))
-            if not math.isfinite(totals[best]):
-                return None
+            if not totals[best] <= limit:
+                if math.isinf(limit):
+                    return None
+                limit = math.inf                           # the guess was short
+                continue
             nodes = path_to(int(target_nodes[best]), predecessor, self.node_count)
             if self.check_path_edges(nodes):
                 return nodes, float(totals[best]), best
         raise RuntimeError(f'{max_searches} searches in a row found a blocked grid edge')
 
     def shortest_paths(self, source_nodes, source_costs, method: str = 'scipy',
-                       targets=None) -> tuple[np.ndarray, np.ndarray]:
+                       targets=None, limit: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
         """Dijkstra from a virtual source joined to ``source_nodes`` at ``source_costs``.
 
         Returns (distance, predecessor) over the nodes; predecessor == node_count marks a
@@ -280,15 +300,15 @@ class ConfigurationGrid:
                                   source_costs.tolist()), targets)
         if method != 'scipy':
             raise ValueError(f"unknown search method '{method}': expected 'scipy' or 'heapq'")
-        # The virtual source is one more row at the end; no edge leads back into it.
+        if len(source_nodes) > SOURCE_SLOTS:
+            raise ValueError(f'{len(source_nodes)} source nodes: at most {SOURCE_SLOTS}')
         source = self.node_count
-        graph = csr_matrix(
-            (np.concatenate([self.weights, source_costs]),
-             np.concatenate([self.indices, source_nodes]),
-             np.append(self.indptr, len(self.indices) + len(source_nodes)).astype(np.int32)),
-            shape=(source + 1, source + 1))
-        distance, predecessor = dijkstra(graph, directed=True, indices=source,
-                                         return_predecessors=True)
+        self._source_indices[:] = source
+        self._source_weights[:] = 0.0
+        self._source_indices[:len(source_nodes)] = source_nodes
+        self._source_weights[:len(source_nodes)] = source_costs
+        distance, predecessor = dijkstra(self._search_graph, directed=True, indices=source,
+                                         return_predecessors=True, limit=limit)
         predecessor = predecessor[:source].astype(np.int64)
         predecessor[predecessor < 0] = -1
         return distance[:source], predecessor

@@ -30,6 +30,10 @@ MAX_FINE_CHECKS = 3
 MIDDLE_FACTOR = 3
 # At most this many corners ahead are tried from each kept waypoint.
 MAX_CANDIDATES = 12
+# The search first looks only this far (factor × the straight move's travel + margin), which
+# is exact when it finds the goal there, and everywhere otherwise.
+SEARCH_GUESS_FACTOR = 1.5
+SEARCH_GUESS_MARGIN_RAD = math.radians(30.0)
 BRANCH_NAMES = ('elbow-positive', 'elbow-negative')
 
 
@@ -208,8 +212,10 @@ class Planner:
         target_costs = np.concatenate([costs for _, costs in goal_links])
         which_goal = np.repeat(np.arange(len(goals)), [len(nodes) for nodes, _ in goal_links])
         try:
+            # Most detours cost well under half as much again as the straight move.
+            guess = SEARCH_GUESS_FACTOR * min(lower_bounds) + SEARCH_GUESS_MARGIN_RAD
             found = grid.shortest_path(source_nodes, source_costs, targets, target_costs,
-                                       self.search, MAX_SEARCHES)
+                                       self.search, MAX_SEARCHES, guess)
         except RuntimeError:
             return Plan.failure('no connection found: too many grid edges turned out blocked '
                                 'by thin forbidden regions; try a finer grid_resolution_rad')
