@@ -5,8 +5,10 @@ the grid and checking its cells; edges are checked lazily) and, for comparison, 
 checking every edge up front would add; then the latency of ``Planner.plan`` over a fixed,
 seeded set of queries whose straight joint-space move is blocked, so every one runs the
 graph search, with scipy.sparse.csgraph.dijkstra and with the plain-Python heapq Dijkstra
-on the same CSR graph (which stops once the goal cells are settled). Each method starts
-from a freshly built planner, so the lazy edge checks are paid as in a fresh node.
+on the same CSR graph (which stops once the goal cells are settled); the last column is
+the time spent in the search itself, the rest being collision checks (connections, lazy
+edge checks, shortcuts), the same for both. Each method starts from a freshly built
+planner, so the lazy edge checks are paid as in a fresh node.
 
     python bench/bench_planner.py            # add --quick for fewer queries
 """
@@ -47,13 +49,27 @@ def queries(planner, count, rng):
 
 
 def latencies_ms(planner, pairs):
-    samples, planned = [], 0
+    """Wall-clock ms of each ``plan`` call, and of the graph searches within it."""
+    searching = planner.grid.shortest_paths
+    search_s = [0.0]
+
+    def timed_search(*args, **kwargs):
+        began = time.perf_counter()
+        try:
+            return searching(*args, **kwargs)
+        finally:
+            search_s[0] += time.perf_counter() - began
+
+    planner.grid.shortest_paths = timed_search
+    samples, searches, planned = [], [], 0
     for start, goal in pairs:
+        search_s[0] = 0.0
         began = time.perf_counter()
         plan = planner.plan(start, goal)
         samples.append(1000 * (time.perf_counter() - began))
+        searches.append(1000 * search_s[0])
         planned += plan.ok
-    return samples, planned
+    return samples, searches, planned
 
 
 def main():
@@ -66,8 +82,8 @@ def main():
           f'{len(heap_pairs)}); check step {math.degrees(base.check_step_rad):.2f} deg; '
           f'load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores\n')
     print('| grid | cells | start-up (lazy edges) | + every edge checked | search | '
-          'queries planned | median | p95 | max |')
-    print('|---|---|---|---|---|---|---|---|---|')
+          'queries planned | median | p95 | max | search alone, median |')
+    print('|---|---|---|---|---|---|---|---|---|---|')
     for resolution_deg in RESOLUTIONS_DEG:
         planner_config = PlannerConfig(math.radians(resolution_deg), base.check_step_rad)
         began = time.perf_counter()
@@ -79,10 +95,11 @@ def main():
         cells = f'{eager.grid.shoulder.count} × {eager.grid.elbow.count}'
         for method, subset in (('scipy', pairs), ('heapq', heap_pairs)):
             planner = Planner(arm, planner_config, search=method)
-            samples, planned = latencies_ms(planner, subset)
+            samples, searches, planned = latencies_ms(planner, subset)
             print(f'| {resolution_deg:g}° | {cells} | {startup_s:.2f} s | {eager_s:.2f} s | '
                   f'{method} | {planned}/{len(subset)} | {statistics.median(samples):.1f} ms | '
-                  f'{np.percentile(samples, 95):.1f} ms | {max(samples):.1f} ms |')
+                  f'{np.percentile(samples, 95):.1f} ms | {max(samples):.1f} ms | '
+                  f'{statistics.median(searches):.1f} ms |')
 
 
 if __name__ == '__main__':

@@ -26,10 +26,10 @@ MAX_SEARCHES = 50
 COARSE_FACTOR = 10
 # Shortcut candidates that pass the coarse check are checked finely, farthest first, this
 # many, each first at a step this many times coarser (a grazing segment fails there).
-MAX_FINE_CHECKS = 3
+MAX_FINE_CHECKS = 6
 MIDDLE_FACTOR = 3
 # At most this many corners ahead are tried from each kept waypoint.
-MAX_CANDIDATES = 12
+MAX_CANDIDATES = 24
 # The search first looks only this far (factor × the straight move's travel + margin), which
 # is exact when it finds the goal there, and everywhere otherwise.
 SEARCH_GUESS_FACTOR = 1.5
