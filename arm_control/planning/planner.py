@@ -18,7 +18,7 @@ import numpy as np
 from arm_control.config import ArmConfig, PlannerConfig
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.planning.cspace import ForbiddenSpace
-from arm_control.planning.graph import ConfigurationGrid, path_to, segments_free
+from arm_control.planning.graph import ConfigurationGrid, segments_free
 
 # Lazily found blocked edges are cut and the search re-run at most this often per query.
 MAX_SEARCHES = 50
