@@ -514,18 +514,19 @@ class ArmController:
         second = time_optimal_trajectory(rest, self.dynamics, self.forbidden, self.limits)
         return ChainedTrajectory([first, second]), ''
 
-    def plan_directly(self, request: PlanRequest) -> TimedPlan:
-        """Plan and time ``request`` with the ``planner`` given to the core.
+    def plan_directly(self, request: PlanRequest, planner=None) -> TimedPlan:
+        """Plan and time ``request`` with ``planner`` (default: the one given to the core).
 
         A planner that can plan to a configuration (``plan_to_configuration``) is asked for
         each free elbow branch, and the branch whose trajectory is shortest in time wins;
         otherwise the planner chooses the branch (by its own cost).
         """
+        planner = planner or self.planner
         started = time.perf_counter()
-        if hasattr(self.planner, 'plan_to_configuration'):
+        if hasattr(planner, 'plan_to_configuration'):
             timed = {}
             for q in self.validator.free_configurations(*request.goal.xy):
-                option = self.time_plan(request, self.planner.plan_to_configuration(
+                option = self.time_plan(request, planner.plan_to_configuration(
                     request.start_q, q))
                 if option.ok:
                     timed[tuple(q)] = option
@@ -534,7 +535,7 @@ class ArmController:
             if best is not None:
                 return dataclasses.replace(timed[tuple(best)],
                                            compute_s=time.perf_counter() - started)
-        plan = self.planner.plan(request.start_q, request.goal.xy)
+        plan = planner.plan(request.start_q, request.goal.xy)
         return dataclasses.replace(self.time_plan(request, plan),
                                    compute_s=time.perf_counter() - started)
 
@@ -722,9 +723,11 @@ class ArmController:
         if self.state == ArmState.DRIVER:
             self._driver_step(now_s)
         q_sp, qd_sp, qdd_sp = self._reference(now_s)
-        # The voltage is held over the coming period: feed forward the setpoint at its middle.
-        feedforward = np.array(self.dynamics.voltage_for(
-            *self._reference(now_s + 0.5 * self.period_s)))
+        # The voltage is held over the coming period: feed forward its average there
+        # (Simpson's rule over the period).
+        feedforward = sum(weight * np.array(self.dynamics.voltage_for(
+            *self._reference(now_s + fraction * self.period_s)))
+            for fraction, weight in ((0.0, 1 / 6), (0.5, 4 / 6), (1.0, 1 / 6)))
         estimate = self.estimator.state
         error = q_sp - estimate[:2]
         feedback = np.array(self.pid.update(error, qd_sp - estimate[2:], dt_s, self.saturated))
