@@ -7,7 +7,8 @@ which the controller never sees.
 import dataclasses
 import math
 
-from geometry_msgs.msg import PointStamped
+from geometry_msgs.msg import PointStamped, TwistStamped
+from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
 import numpy as np
 import pytest
@@ -129,12 +130,33 @@ def test_services_estop_reset_cancel_enable(launch, probe, arm):
     assert probe.spin_until(lambda: states[-1].data == 'disabled', 5.0)
     assert probe.call(SetBool, '/controller/enable', SetBool.Request(data=True)).success
     assert probe.spin_until(lambda: states[-1].data == 'waiting', 5.0)
+    queue = probe.collect(Path, '/controller/goal_queue', LATCHED)
     send(1.1, 0.9)
     send(0.9, 1.5)
     assert probe.spin_until(lambda: states[-1].data == 'tracking', 10.0)
+    assert probe.spin_until(lambda: queue and len(queue[-1].poses) == 2, 5.0)
+    assert [(p.pose.position.x, p.pose.position.y) for p in queue[-1].poses] == \
+        [(1.1, 0.9), (0.9, 1.5)]                            # the current goal first
     response = probe.call(Trigger, '/controller/cancel', Trigger.Request())
     assert response.success and '2 goals dropped' in response.message
     assert probe.spin_until(lambda: states[-1].data == 'waiting', 5.0)
+
+    # Malformed input of every kind: said, ignored, the node carries on.
+    bad_states = probe.node.create_publisher(JointState, '/joint_states', 10)
+    bad_driver = probe.node.create_publisher(TwistStamped, '/driver_velocity', COMMANDS)
+    presets = probe.node.create_publisher(String, '/goal_preset', COMMANDS)
+    assert probe.spin_until(lambda: bad_driver.get_subscription_count() > 0
+                            and presets.get_subscription_count() > 0, 10.0)
+    bad_states.publish(JointState(name=['wrist'], position=[math.nan]))
+    twist = TwistStamped()
+    twist.twist.linear.x = math.inf
+    bad_driver.publish(twist)
+    presets.publish(String(data='moon'))
+    send(math.inf, -math.inf, math.nan)
+    assert probe.spin_until(lambda: any("preset 'moon'" in e.data for e in events)
+                            and any('driver command' in e.data for e in events), 5.0)
+    assert probe.processes['controller'].alive()
+    assert 'ignored joint_states' in probe.processes['controller'].output()
 
     voltages = probe.collect(Float64MultiArray, '/voltage_command', COMMANDS)
     assert probe.spin_until(lambda: len(voltages) > 10, 5.0)
@@ -163,6 +185,7 @@ def test_frc_robot_every_move_planned_with_zero_contact(launch, probe, frc_robot
         send(*positions[name])                             # queued, visited in order
     assert probe.spin_until(lambda: len(reached(events)) == len(names), 60.0), \
         [e.data for e in events]
+    probe.spin_for(0.5)                                   # held at the last one
     presets.publish(String(data='shelf_pickup'))          # a button: replaces, goes now
     assert probe.spin_until(lambda: len(reached(events)) == len(names) + 1, 15.0)
     probe.spin_for(0.3)

@@ -28,6 +28,7 @@ from geometry_msgs.msg import PointStamped, PoseStamped, Quaternion, TwistStampe
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
 import numpy as np
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.signals import uninstall_signal_handlers
 from sensor_msgs.msg import JointState
@@ -43,6 +44,7 @@ from arm_control.planning.planner import waypoints_from_poses
 
 FRAME = 'arm_base'
 EVENT_QOS_DEPTH = 50
+SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V command to arrive
 
 
 class ServicePlan:
@@ -376,6 +378,8 @@ class ControllerNode(Node):
         try:
             for _ in range(3):
                 self.publish_voltage(np.zeros(2))
+            # Reliable: make sure the sim has it before the process goes away.
+            self.voltage_pub.wait_for_all_acked(Duration(seconds=SHUTDOWN_ACK_S))
         except Exception as error:              # the context may already be gone
             self.get_logger().warning(f'could not send 0 V on shutdown: {error}')
 
