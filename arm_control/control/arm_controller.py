@@ -11,7 +11,9 @@ Each period the node (or a test, or a benchmark) calls ``step(now_s, reading)``;
 
        V = voltage_for(q_sp, q̇_sp, q̈_sp) + kp·e + ki·∫e + kd·ė,   clamped to ±max_voltage;
 
-   the trajectory is timed with ``feedback_voltage_reserve`` volts left for the PID;
+   the voltage is held for a whole period, so the feedforward is its average over the
+   period (Simpson's rule: 1/6, 4/6, 1/6 at the start, middle and end); the trajectory is
+   timed with ``feedback_voltage_reserve`` volts left for the PID;
 4. enforces the e-stop rules: tracking error above ``tracking_error_limit_rad`` for
    ``tracking_error_time_s``, or a joint past its limit -> 0 V until ``reset``.
 
@@ -25,6 +27,11 @@ it directly, for tests and benchmarks in simulated time. No plan within
 A goal that preempts the current motion (a preset, as a driver's button) is planned from
 where the moving setpoint will be a short lead time ahead, with that velocity, and the new
 trajectory takes over at that instant: position and velocity continue.
+
+A large jump of the sensors (the filter re-initialises farther from the setpoint than the
+tracking-error limit: the arm was moved, the sim restarted) makes the arm hold where it now
+is and plan an interrupted goal again from there; a start in forbidden space is left along
+the planner's first leg (timed without the free-space check it cannot pass).
 """
 
 from collections import deque
