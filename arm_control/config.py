@@ -297,6 +297,7 @@ class SimConfig:
     physics_step_s: float
     command_timeout_s: float
     initial_position: tuple[float, float]
+    rest_until_first_command: bool
     random_seed: int
 
     @classmethod
@@ -307,6 +308,7 @@ class SimConfig:
             physics_step_s=read.number('physics_step_s', low=0.0, high=0.001, low_open=True),
             command_timeout_s=read.positive('command_timeout_s'),
             initial_position=read.numbers('initial_position', 2),
+            rest_until_first_command=read.boolean('rest_until_first_command'),
             random_seed=read.integer('random_seed', low=-1),
         )
 

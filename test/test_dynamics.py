@@ -135,3 +135,13 @@ def test_potentiometer_noise_has_the_configured_spread(arm):
     samples = np.array([plant.read().potentiometer_rad for _ in range(4000)])
     assert np.std(samples[:, 0]) == pytest.approx(arm.shoulder.potentiometer_noise_rad, rel=0.05)
     assert np.mean(samples[:, 0]) == pytest.approx(1.0, abs=3e-4)
+
+
+def test_a_resting_arm_stays_put_until_released(arm):
+    plant = ArmPlant(arm, (0.0, 0.0))
+    plant.rest()
+    plant.advance(1.0)
+    assert plant.state == [0.0, 0.0, 0.0, 0.0] and plant.time_s == pytest.approx(1.0)
+    plant.release()
+    plant.advance(0.5)
+    assert plant.state[0] < -0.05                  # gravity takes it once released

@@ -36,6 +36,7 @@ class ArmPlant:
         self.sensors = Sensors(arm.joints, initial_position, np.random.default_rng(seed))
         self.voltage = (0.0, 0.0)
         self.time_s = 0.0
+        self.resting = False
         self.reset(initial_position)
 
     def reset(self, position, velocity=(0.0, 0.0)) -> None:
@@ -53,9 +54,21 @@ class ArmPlant:
         limit = self.arm.max_voltage
         self.voltage = tuple(min(max(float(v), -limit), limit) for v in voltage)
 
+    def rest(self) -> None:
+        """Hold the arm still where it is, as on its stow support, until ``release``."""
+        self.resting = True
+        self.state[2:] = [0.0, 0.0]
+
+    def release(self) -> None:
+        self.resting = False
+
     def advance(self, duration_s: float) -> None:
         """Step the physics forward by ``duration_s`` (rounded to whole substeps)."""
-        for _ in range(max(0, round(duration_s / self.physics_step_s))):
+        steps = max(0, round(duration_s / self.physics_step_s))
+        if self.resting:
+            self.time_s += steps * self.physics_step_s
+            return
+        for _ in range(steps):
             self.state = rk4(self.dynamics.derivative, self.state, self.voltage,
                              self.physics_step_s)
             self._hard_stops()

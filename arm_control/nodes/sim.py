@@ -35,6 +35,8 @@ class SimNode(Node):
         seed = None if self.config.random_seed < 0 else self.config.random_seed
         self.plant = ArmPlant(self.arm, self.config.initial_position,
                               self.config.physics_step_s, seed)
+        if self.config.rest_until_first_command:
+            self.plant.rest()
         self.last_command_time = -math.inf
         self.commands_rejected = 0
         self.timed_out = True
@@ -65,6 +67,9 @@ class SimNode(Node):
                 'keeping the last good command', throttle_duration_sec=1.0)
             return
         self.plant.set_voltage(voltage)
+        if self.plant.resting:
+            self.plant.release()
+            self.get_logger().info('first voltage command: the arm leaves its rest')
         self.last_command_time = time.monotonic()
         if self.timed_out:
             self.timed_out = False
@@ -84,6 +89,8 @@ class SimNode(Node):
     def on_reset(self, request, response):
         self.plant.reset(self.config.initial_position)
         self.plant.set_voltage((0.0, 0.0))
+        if self.config.rest_until_first_command:
+            self.plant.rest()
         response.success = True
         response.message = f'arm at rest at {list(self.config.initial_position)} rad'
         self.get_logger().info(response.message)
