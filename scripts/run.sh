@@ -9,31 +9,43 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 PARAMS="$(realpath "${1:-$ROOT/config/arm.yaml}")"
+HERE="$PWD"
 # shellcheck disable=SC1091
 source "$ROOT/scripts/setup.sh"
+# Where `ros2 run arm_control <name>` looks: <prefix>/lib/arm_control/<name>.
+BIN="$(python -c 'from ament_index_python.packages import get_package_prefix as p
+print(p("arm_control"))')/lib/arm_control"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 100) + 1 ))}"
 echo "== running on ROS domain $ROS_DOMAIN_ID with $PARAMS"
+
+# Run-time overrides as a second parameter file: a `-p` override applies to `/**`, which the
+# node sections of $PARAMS (`/viewer:`, `/tour:`) would outrank.
+OVERRIDES="$(mktemp --suffix=.yaml)"
+headless=false
+if [ -z "${DISPLAY:-}" ]; then
+  headless=true
+  echo "== no display: the viewer draws to $HERE/arm_view.png"
+fi
+cat > "$OVERRIDES" <<YAML
+/viewer:
+  ros__parameters: {headless: $headless, png_path: "$HERE/arm_view.png"}
+/tour:
+  ros__parameters: {loops: ${TOUR_LOOPS:-1}}
+YAML
+ros_args=(--ros-args --params-file "$PARAMS" --params-file "$OVERRIDES")
 
 pids=()
 stop() {
   for pid in "${pids[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
   wait 2>/dev/null || true
+  rm -f "$OVERRIDES"
 }
 trap stop EXIT INT TERM
 
-for node in sim planner controller; do
-  ros2_run_args=(--ros-args --params-file "$PARAMS")
-  "$ROOT/install/lib/arm_control/$node" "${ros2_run_args[@]}" &
+for node in sim planner controller viewer; do
+  "$BIN/$node" "${ros_args[@]}" &
   pids+=($!)
 done
-viewer_args=(--ros-args --params-file "$PARAMS")
-if [ -z "${DISPLAY:-}" ]; then
-  viewer_args+=(-p headless:=true -p "png_path:=$PWD/arm_view.png")
-  echo "== no display: the viewer draws to $PWD/arm_view.png"
-fi
-"$ROOT/install/lib/arm_control/viewer" "${viewer_args[@]}" &
-pids+=($!)
-
-"$ROOT/install/lib/arm_control/tour" --ros-args --params-file "$PARAMS" \
-  -p "loops:=${TOUR_LOOPS:-1}"
+"$BIN/tour" "${ros_args[@]}"
+sleep 1                               # one more picture of where the tour ended
