@@ -328,6 +328,7 @@ class ControllerConfig:
     joint_state_timeout_s: float
     planner_timeout_s: float
     feedback_voltage_reserve: float
+    driving_voltage_reserve: float
     max_velocity_rad_s: tuple[float, float]
     max_acceleration_rad_s2: tuple[float, float]
     shoulder_pid: tuple[float, float, float]
@@ -365,6 +366,7 @@ class ControllerConfig:
             joint_state_timeout_s=read.positive('joint_state_timeout_s'),
             planner_timeout_s=read.positive('planner_timeout_s'),
             feedback_voltage_reserve=read.nonnegative('feedback_voltage_reserve'),
+            driving_voltage_reserve=read.nonnegative('driving_voltage_reserve'),
             max_velocity_rad_s=positive_pair('max_velocity_rad_s'),
             max_acceleration_rad_s2=positive_pair('max_acceleration_rad_s2'),
             shoulder_pid=gains('shoulder_pid'),

@@ -3,17 +3,19 @@
 For each move of the default arm (start and goal points in arm_base): the planner's joint path
 (``Planner.plan``; IK and a checked straight joint line when the planner is missing), then
 
-- toppra: ``time_optimal_trajectory`` along that path with the controller's limits (11 V =
-  12 V less the feedback reserve, speed and acceleration limits): its duration, the time to
-  compute it, its peak feedforward voltage, its lowest point;
-- toppra 12 V: the same path and method with the whole 12 V and no speed or acceleration
+- traj: ``time_optimal_trajectory`` from that path with the controller's limits (12 V
+  driving, 12 V less the feedback reserve braking, the speed and acceleration limits): the
+  path reshaped where that is faster, then timed; its duration, the time to compute it, its
+  peak feedforward voltage, its lowest point;
+- unshaped: the same on the planner's path as it is (``reshape=False``): what reshaping gains;
+- 12 V: reshaped and timed with the whole 12 V both ways and no speed or acceleration
   limits, to separate what the margins cost from what the path and the method cost;
 - minimum time: a direct-collocation optimal-control solve (casadi + IPOPT, Hermite-Simpson)
   of the free-path problem: the full coupled dynamics ẋ = f(x, u) written in casadi, |u| ≤
   12 V, the elbow and the tool above the floor (y ≥ 0), the joint limits and the elbow fold,
   start and end at rest. The knot count is refined (25, 50, 100) and each time printed, with
   the last change, which must be small (≤ 0.5 %) for the minimum time to count as settled.
-  IPOPT finds a local optimum, started from the toppra trajectory;
+  IPOPT finds a local optimum, started from the timed trajectory;
 - preempted: halfway through, a new goal back at the start point, replanned and timed from
   the moving state (the arm's velocity then).
 
@@ -29,6 +31,7 @@ Columns are plain functions of a ``Move`` returning {column name: text}; add one
 
 from dataclasses import dataclass, field
 import math
+from pathlib import Path
 import statistics
 import sys
 import time
@@ -36,12 +39,14 @@ import time
 import casadi
 import numpy as np
 
-from arm_control import config
-from arm_control.control.trajectory import (time_optimal_trajectory, TrajectoryLimits,
-                                            trajectory_voltage)
-from arm_control.model.dynamics import ArmDynamics, COULOMB_SMOOTHING_RAD_S
-from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
-from arm_control.planning.cspace import ForbiddenSpace
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))     # the package above
+
+from arm_control import config  # noqa: E402
+from arm_control.control.trajectory import (time_optimal_trajectory,  # noqa: E402
+                                            trajectory_voltage, TrajectoryLimits)
+from arm_control.model.dynamics import ArmDynamics, COULOMB_SMOOTHING_RAD_S  # noqa: E402
+from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError  # noqa: E402
+from arm_control.planning.cspace import ForbiddenSpace  # noqa: E402
 
 KNOTS = (25, 50, 100)
 CONVERGED = 0.005           # relative change of the minimum time that counts as settled
@@ -152,7 +157,7 @@ def column_path(move: Move) -> dict:
             'path ms cpu': f'{move.path_ms:.1f}'}
 
 
-def column_toppra(move: Move) -> dict:
+def column_trajectory(move: Move) -> dict:
     """The trajectory the controller gets: duration, time to compute, peak volts, floor."""
     trajectory, cpu_ms, wall_ms = timed(lambda: time_optimal_trajectory(
         move.waypoints, move.dynamics, move.forbidden, move.limits))
@@ -161,18 +166,26 @@ def column_toppra(move: Move) -> dict:
     peak = np.max(np.abs(trajectory_voltage(trajectory, move.dynamics, times)))
     q, _, _ = trajectory.sample_many(times)
     lowest_mm = 1e3 * float(np.min(_heights(move.arm, q)))
-    move.results['toppra_s'] = trajectory.duration_s
-    return {'toppra s': f'{trajectory.duration_s:.3f}',
+    move.results['traj_s'] = trajectory.duration_s
+    return {'traj s': f'{trajectory.duration_s:.3f}',
             'timing ms cpu/wall': f'{cpu_ms:.1f}/{wall_ms:.0f}',
             'peak V': f'{peak:.2f}', 'lowest mm': f'{lowest_mm:.0f}'}
 
 
-def column_toppra_full_voltage(move: Move) -> dict:
+def column_unshaped(move: Move) -> dict:
+    """The planner's path as it is, timed the same way."""
+    trajectory = time_optimal_trajectory(move.waypoints, move.dynamics, move.forbidden,
+                                         move.limits, reshape=False)
+    move.results['unshaped_s'] = trajectory.duration_s
+    return {'unshaped s': f'{trajectory.duration_s:.3f}'}
+
+
+def column_full_voltage(move: Move) -> dict:
     """The same path and method at the whole 12 V with no speed or acceleration limits."""
     loose = TrajectoryLimits((1e3, 1e3), (1e4, 1e4), move.arm.max_voltage)
     trajectory = time_optimal_trajectory(move.waypoints, move.dynamics, move.forbidden, loose)
-    move.results['toppra_12v_s'] = trajectory.duration_s
-    return {'toppra 12 V s': f'{trajectory.duration_s:.3f}'}
+    move.results['full_12v_s'] = trajectory.duration_s
+    return {'12 V s': f'{trajectory.duration_s:.3f}'}
 
 
 def column_minimum_time(move: Move) -> dict:
@@ -195,8 +208,9 @@ def column_minimum_time(move: Move) -> dict:
     change = abs(times[-1] - times[-2]) / times[-1]
     out['last change'] = f'{100 * change:.2f} %' + ('' if change <= CONVERGED else ' (!)')
     out['solve s'] = f'{solve_s:.1f}'
-    out['toppra/min'] = f'{move.results["toppra_s"] / best:.3f}'
-    out['12 V/min'] = f'{move.results["toppra_12v_s"] / best:.3f}'
+    out['traj/min'] = f'{move.results["traj_s"] / best:.3f}'
+    out['unshaped/min'] = f'{move.results["unshaped_s"] / best:.3f}'
+    out['12 V/min'] = f'{move.results["full_12v_s"] / best:.3f}'
     return out
 
 
@@ -215,7 +229,8 @@ def column_preempted(move: Move) -> dict:
             'preempt peak V': f'{peak:.2f}'}
 
 
-COLUMNS = [column_path, column_toppra, column_toppra_full_voltage, column_minimum_time,
+COLUMNS = [column_path, column_trajectory, column_unshaped, column_full_voltage,
+           column_minimum_time,
            column_preempted]
 
 
@@ -357,15 +372,16 @@ def main(count=None):
         rows.append(row)
         print(' | '.join(f'{k}={v}' for k, v in row.items()), file=sys.stderr, flush=True)
     keys = list(dict.fromkeys(k for row in rows for k in row))
-    print(f'trajectory limits: {limits.max_voltage:g} V, velocity '
-          f'{limits.max_velocity_rad_s} rad/s, acceleration {limits.max_acceleration_rad_s2} '
-          f'rad/s^2; minimum time at {arm.max_voltage:g} V, free path')
+    print(f'trajectory limits: {limits.budget[0]:g} V driving, {limits.budget[1]:g} V '
+          f'braking, velocity {limits.max_velocity_rad_s} rad/s, acceleration '
+          f'{limits.max_acceleration_rad_s2} rad/s^2; minimum time at {arm.max_voltage:g} V, '
+          'free path')
     print('| ' + ' | '.join(keys) + ' |')
     print('|' + '---|' * len(keys))
     for row in rows:
         print('| ' + ' | '.join(str(row.get(k, '')) for k in keys) + ' |')
-    ratios = [float(r['toppra/min']) for r in rows]
-    print(f'toppra/min: worst {max(ratios):.3f}, median {statistics.median(ratios):.3f}')
+    ratios = [float(r['traj/min']) for r in rows]
+    print(f'traj/min: worst {max(ratios):.3f}, median {statistics.median(ratios):.3f}')
 
 
 if __name__ == '__main__':

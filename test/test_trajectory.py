@@ -60,10 +60,11 @@ def follow_open_loop(arm, trajectory, start_velocity=(0.0, 0.0), step_s=0.001, h
 
 
 def test_limits_from_config_keep_the_feedback_reserve(setup):
+    """The reserve for feedback on the braking side, the driving one's on the other."""
     arm, _, _, limits = setup
     _, controller = config.load('controller')
-    assert limits.max_voltage == pytest.approx(arm.max_voltage
-                                               - controller.feedback_voltage_reserve)
+    assert limits.budget == pytest.approx((arm.max_voltage - controller.driving_voltage_reserve,
+                                           arm.max_voltage - controller.feedback_voltage_reserve))
     assert limits.max_velocity_rad_s == controller.max_velocity_rad_s
 
 
@@ -289,7 +290,7 @@ def test_a_moving_start_is_no_slower_than_stopping_first(setup):
     waypoints = [(0.5, -0.5), (2.0, -0.5)]
     moving = time_optimal_trajectory(waypoints, dynamics, forbidden, limits, (1.5, 0.0))
     resting = time_optimal_trajectory(waypoints, dynamics, forbidden, limits)
-    assert moving.duration_s < resting.duration_s - 0.1
+    assert moving.duration_s < resting.duration_s - 0.05     # (the rest start is reshaped)
 
 
 def test_a_start_faster_than_the_speed_limit_slows_into_it(setup):
@@ -315,3 +316,135 @@ def test_a_start_inside_forbidden_space_follows_the_planned_way_out(setup):
     assert np.all(forbidden.is_free(q[escaped]))
     assert np.all(np.abs(q[~escaped, 1] - 0.3) < 1e-9)       # on the way-out segment
     np.testing.assert_array_equal(trajectory.sample(trajectory.duration_s)[0], (1.2, -0.5))
+
+
+# --- reshaping, the exact timing from rest, the voltage windows, the period feedforward ----
+
+def test_model_voltages_are_the_models_voltage_for(setup):
+    """The batched voltage equals ``ArmDynamics.voltage_for``, friction included."""
+    arm, _, _, _ = setup
+    joint = dataclasses.replace(arm.elbow, viscous_friction_nm_s_per_rad=2.0,
+                                coulomb_friction_nm=4.0)
+    dynamics = ArmDynamics(dataclasses.replace(arm, elbow=joint))
+    rng = np.random.default_rng(7)
+    q, qd, qdd = rng.uniform(-3, 3, (40, 2)), rng.uniform(-4, 4, (40, 2)), \
+        rng.uniform(-60, 60, (40, 2))
+    expected = [dynamics.voltage_for(*state) for state in zip(q, qd, qdd)]
+    np.testing.assert_allclose(trajectory_module.model_voltages(dynamics, q, qd, qdd), expected,
+                               atol=1e-9)
+
+
+def link_heights(arm, q):
+    """The lower of the elbow's and the tool's heights (m) for each configuration."""
+    elbow = np.sin(q[:, 0]) * arm.shoulder.length_m
+    return np.minimum(elbow, elbow + np.sin(q.sum(axis=1)) * arm.elbow.length_m)
+
+
+@pytest.mark.parametrize('name', ['three corners', 'front over the top to the back'])
+def test_a_bent_path_is_faster_free_and_keeps_its_room(setup, name):
+    """Reshaping (folding the elbow on the way, ...) beats the planner's shortest path by
+    several percent, stays free at 0.1 deg steps and keeps 3 cm from the floor wherever the
+    planner's path did."""
+    arm, dynamics, forbidden, limits = setup
+    waypoints = PATHS[name]
+    bent = time_optimal_trajectory(waypoints, dynamics, forbidden, limits)
+    straight = time_optimal_trajectory(waypoints, dynamics, forbidden, limits, reshape=False)
+    assert bent.duration_s < 0.97 * straight.duration_s
+    _, q, _, _ = dense(bent, 20000)
+    assert np.all(forbidden.is_free(q))
+    _, q_straight, _, _ = dense(straight, 20000)
+    heights, straight_heights = link_heights(arm, q), link_heights(arm, q_straight)
+    assert heights.min() >= min(straight_heights.min(), 0.03) - 1e-3
+
+
+def test_the_exact_timing_matches_toppra_on_a_straight_path(setup):
+    """Two methods, one answer: the closed-form passes (back-EMF exact) and TOPP-RA
+    (back-EMF linearised, iterated) time the same path within 2 %."""
+    _, dynamics, forbidden, limits = setup
+    waypoints = np.array(PATHS['up to the front'])
+    exact = time_optimal_trajectory(waypoints, dynamics, forbidden, limits, reshape=False)
+    path = BlendedPath(waypoints, [])
+    grid = trajectory_module._grid_for(path)
+    model = trajectory_module._PathModel(path, dynamics, grid)
+    x, _ = trajectory_module._time_piece(path, model, limits, limits.budget, 0.0)
+    toppra_s = trajectory_module._piece_duration(grid, np.sqrt(x))
+    assert exact.duration_s == pytest.approx(toppra_s, rel=0.02)
+
+
+def test_braking_keeps_its_reserve_and_driving_uses_the_rest(setup):
+    """A joint's voltage reaches the driving limit along its motion, and against it never
+    passes the (lower) braking limit, which it also reaches."""
+    _, dynamics, forbidden, _ = setup
+    limits = TrajectoryLimits((6.0, 6.0), (150.0, 530.0), 12.0, 10.0)
+    trajectory = time_optimal_trajectory(PATHS['up to the front'], dynamics, forbidden, limits,
+                                         reshape=False)
+    times, q, qd, qdd = dense(trajectory, 8000)
+    volts = trajectory_voltage(trajectory, dynamics, times)
+    moving = np.abs(qd) > 0.05
+    along = np.sign(qd) * volts
+    assert along[moving].max() <= 12.0 + VOLTAGE_TOLERANCE
+    assert along[moving].max() > 11.8
+    assert along[moving].min() >= -10.0 - VOLTAGE_TOLERANCE
+    assert along[moving].min() < -9.8
+
+
+@pytest.mark.parametrize('name', sorted(PATHS))
+def test_the_quick_estimate_is_near_the_timing(setup, name):
+    _, dynamics, forbidden, limits = setup
+    estimate = trajectory_module.estimated_duration_s(PATHS[name], dynamics, limits)
+    timed = time_optimal_trajectory(PATHS[name], dynamics, forbidden, limits, reshape=False)
+    assert estimate == pytest.approx(timed.duration_s, rel=0.1)
+
+
+def test_the_sure_acceleration_is_there_in_every_free_pose(setup):
+    """In random free poses, each joint can accelerate at least that much either way."""
+    arm, dynamics, forbidden, _ = setup
+    sure = trajectory_module.sure_acceleration_rad_s2(dynamics, forbidden, 11.0)
+    assert np.all(sure > 1.0)
+    rng = np.random.default_rng(3)
+    poses = rng.uniform([0.0, -2.9], [math.pi, 2.9], (300, 2))
+    corners = [(-11.0, -11.0), (-11.0, 11.0), (11.0, -11.0), (11.0, 11.0)]
+    for q in poses[np.asarray(forbidden.is_free(poses), dtype=bool)]:
+        reach = np.array([dynamics.derivative([q[0], q[1], 0.0, 0.0], v)[2:] for v in corners])
+        assert np.all(reach.max(axis=0) >= 0.99 * sure)
+        assert np.all(-reach.min(axis=0) >= 0.99 * sure)
+
+
+def drive_held(arm, trajectory, voltage_for_period, period_s=0.02, hold_s=0.3):
+    """The noise-free plant driven at 50 Hz by a voltage held over each period: the true
+    state at every period's start, and at the end."""
+    plant = ArmPlant(arm, trajectory.start_rad)
+    states = []
+    for k in range(int(math.ceil((trajectory.duration_s + hold_s) / period_s))):
+        states.append(np.array(plant.state))
+        plant.set_voltage(voltage_for_period(k * period_s))
+        plant.advance(period_s)
+    return np.array(states), np.array(plant.state)
+
+
+def test_the_period_feedforward_keeps_the_held_arm_on_the_trajectory(setup):
+    """Held 20 ms at a time, the deadbeat feedforward moves the arm exactly as its reference
+    and brings it to rest on the goal two periods after the trajectory ends; the period's
+    average voltage (Simpson) leaves it about a third of a degree off."""
+    arm, dynamics, forbidden, limits = setup
+    waypoints = PATHS['up to the front']
+    trajectory = time_optimal_trajectory(waypoints, dynamics, forbidden, limits)
+    feedforward = trajectory_module.PeriodFeedforward(dynamics, 0.02, arm.max_voltage)
+    references = []
+
+    def deadbeat(t):
+        voltage = feedforward.step(t, trajectory.sample)
+        references.append(feedforward.state.copy())
+        return voltage
+
+    def average(t):
+        return sum(w * np.array(dynamics.voltage_for(*trajectory.sample(t + f * 0.02)))
+                   for f, w in ((0.0, 1 / 6), (0.5, 4 / 6), (1.0, 1 / 6)))
+
+    states, _ = drive_held(arm, trajectory, deadbeat)
+    np.testing.assert_allclose(states[:, :2], np.array(references)[:, :2], atol=1e-4)
+    np.testing.assert_allclose(states[:, 2:], np.array(references)[:, 2:], atol=0.01)
+    after = np.arange(len(states)) * 0.02 >= trajectory.duration_s + 0.04
+    assert np.max(np.abs(states[after, :2] - waypoints[-1])) < math.radians(0.01)
+    held, _ = drive_held(arm, trajectory, average)
+    assert np.max(np.abs(held[after, :2] - waypoints[-1])) > math.radians(0.2)

@@ -11,9 +11,11 @@ Each period the node (or a test, or a benchmark) calls ``step(now_s, reading)``;
 
        V = voltage_for(q_sp, q̇_sp, q̈_sp) + kp·e + ki·∫e + kd·ė,   clamped to ±max_voltage;
 
-   the voltage is held for a whole period, so the feedforward is its average over the
-   period (Simpson's rule: 1/6, 4/6, 1/6 at the start, middle and end); the trajectory is
-   timed with ``feedback_voltage_reserve`` volts left for the PID;
+   the voltage is held for a whole period, so the feedforward is the held voltage that
+   keeps a model of the arm on the trajectory (``PeriodFeedforward``: each period's
+   position and velocity, not only its average voltage), and the PID tracks that model's
+   state; the trajectory is timed with ``feedback_voltage_reserve`` volts left for the PID
+   where it brakes a joint (``driving_voltage_reserve`` where it drives one);
 4. enforces the e-stop rules: tracking error above ``tracking_error_limit_rad`` for
    ``tracking_error_time_s``, or a joint past its limit -> 0 V until ``reset``.
 
@@ -48,14 +50,18 @@ from arm_control.control.estimator import ArmEstimator
 from arm_control.control.goals import CHECK_STEP_RAD, choose_branch, Goal, GoalValidator
 from arm_control.control.pid import ArmPid
 from arm_control.control.state_machine import ArmState, StateMachine, Trigger, ZERO_VOLTS
-from arm_control.control.trajectory import (time_optimal_trajectory, TrajectoryError,
-                                            TrajectoryLimits)
+from arm_control.control.trajectory import (estimated_duration_s, PeriodFeedforward,
+                                            sure_acceleration_rad_s2, time_optimal_trajectory,
+                                            TrajectoryError, TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 
 # A preempting goal's new trajectory starts this far ahead on the current one: the time
 # the planner and the timing need, so the switch happens on time. Doubled on each retry.
 PREEMPT_LEAD_S = 0.1
+# plan_directly times in full only the elbow branches whose quick duration estimate is
+# within this fraction of the best one's.
+BRANCH_SCREEN_MARGIN = 0.25
 # The first waypoint of a plan may differ from the requested start by rounding only.
 PLAN_START_TOLERANCE_RAD = 0.01
 # ... and its last must put the tool on the goal.
@@ -282,10 +288,19 @@ class ArmController:
         self.limits = TrajectoryLimits.from_config(arm, config)
         self.estimator = ArmEstimator(arm, config.process_noise_rad_s2)
         self.pid = ArmPid.from_config(config)
+        self.period_feedforward = PeriodFeedforward(self.dynamics, 1.0 / config.loop_rate_hz,
+                                                    arm.max_voltage)
         self.machine = StateMachine()
         self.period_s = 1.0 / config.loop_rate_hz
-        self.max_velocity = np.asarray(config.max_velocity_rad_s, float)
-        self.max_acceleration = np.asarray(config.max_acceleration_rad_s2, float)
+        # Braking and driver mode count on what the motors surely give in any pose, which
+        # the trajectory limits (the motors' best) may exceed: no more than the free speed,
+        # and the acceleration the least favourable free pose allows.
+        self.max_velocity = np.minimum(
+            np.asarray(config.max_velocity_rad_s, float),
+            [min(self.limits.budget) / motor.back_emf_v(1.0) for motor in self.dynamics.motors])
+        self.max_acceleration = np.minimum(
+            np.asarray(config.max_acceleration_rad_s2, float),
+            sure_acceleration_rad_s2(self.dynamics, self.forbidden, min(self.limits.budget)))
         self.limit_margin_rad = np.array([max(JOINT_LIMIT_MARGIN_RAD,
                                               6.0 * j.potentiometer_noise_rad)
                                           for j in arm.joints])
@@ -531,12 +546,21 @@ class ArmController:
         planner = planner or self.planner
         started = time.perf_counter()
         if hasattr(planner, 'plan_to_configuration'):
+            # Each branch's path, ranked by a quick estimate of its duration; only those
+            # within BRANCH_SCREEN_MARGIN of the best are timed in full (path reshaping
+            # gains less than that).
+            plans = {tuple(q): planner.plan_to_configuration(request.start_q, q)
+                     for q in self.validator.free_configurations(*request.goal.xy)}
+            several = sum(plan.ok for plan in plans.values()) > 1
+            estimates = {q: estimated_duration_s(plan.waypoints_rad, self.dynamics, self.limits)
+                         if plan.ok and several else 0.0 for q, plan in plans.items()}
+            fastest = min(estimates.values(), default=math.inf)
             timed = {}
-            for q in self.validator.free_configurations(*request.goal.xy):
-                option = self.time_plan(request, planner.plan_to_configuration(
-                    request.start_q, q))
-                if option.ok:
-                    timed[tuple(q)] = option
+            for q, plan in plans.items():
+                if plan.ok and estimates[q] <= fastest * (1.0 + BRANCH_SCREEN_MARGIN):
+                    option = self.time_plan(request, plan)
+                    if option.ok:
+                        timed[q] = option
             best = choose_branch(request.start_q, list(timed),
                                  lambda q: timed[tuple(q)].trajectory.duration_s)
             if best is not None:
@@ -730,14 +754,14 @@ class ArmController:
         if self.state == ArmState.DRIVER:
             self._driver_step(now_s)
         q_sp, qd_sp, qdd_sp = self._reference(now_s)
-        # The voltage is held over the coming period: feed forward its average there
-        # (Simpson's rule over the period).
-        feedforward = sum(weight * np.array(self.dynamics.voltage_for(
-            *self._reference(now_s + fraction * self.period_s)))
-            for fraction, weight in ((0.0, 1 / 6), (0.5, 4 / 6), (1.0, 1 / 6)))
+        # The voltage is held over the coming period: the feedforward keeps a model of the
+        # arm on the trajectory at every period's end; the PID tracks that model.
+        feedforward = self.period_feedforward.step(now_s, self._reference)
+        reference = self.period_feedforward.state
         estimate = self.estimator.state
-        error = q_sp - estimate[:2]
-        feedback = np.array(self.pid.update(error, qd_sp - estimate[2:], dt_s, self.saturated))
+        error = reference[:2] - estimate[:2]
+        feedback = np.array(self.pid.update(error, reference[2:] - estimate[2:], dt_s,
+                                            self.saturated))
         total = feedforward + feedback
         limit = self.arm.max_voltage
         self.saturated = tuple(int(np.sign(v)) if abs(v) > limit else 0 for v in total)
