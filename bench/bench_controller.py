@@ -489,6 +489,15 @@ def main(argv):
     print(f'CPU per control cycle (estimator + state machine + period feedforward + PID; '
           f'planning apart): median {np.median(cycles):.2f} ms, p99 '
           f'{np.percentile(cycles, 99):.2f} ms of the {1000 / rate:g} ms period')
+    if minimum:
+        import bench_trajectory as bt
+        print(f'\nMinimum time (direct collocation, least over the free elbow branches) as the '
+              f'knots are refined {bt.KNOTS}:')
+        for name, _, _, _ in rows:
+            knots = minimum.get(name, {}).get('knots_s', [])
+            change = (abs(knots[-1] - knots[-2]) / knots[-1] if len(knots) > 1 else math.nan)
+            print(f'  {name}: {", ".join(fmt(t, ".4f") for t in knots)} s '
+                  f'(last change {fmt(100 * change, ".2f")} %)')
     if options['latency']:
         print('\nWhat latency costs (move time s): ours as above | the plan taken only at the '
               'next regular 50 Hz tick | ours with a 200 Hz loop')
