@@ -68,6 +68,11 @@ PLAN_START_TOLERANCE_RAD = 0.01
 PLAN_GOAL_TOLERANCE_M = 0.002
 # A joint past its limit by more than this (or 6 potentiometer sigmas) e-stops the arm.
 JOINT_LIMIT_MARGIN_RAD = 0.01
+# A sensor jump means the arm was put elsewhere only if the potentiometers moved farther
+# between two readings than this speed (three times the motors' free speed through the
+# gearbox, 3.5 rad/s) allows, plus this margin for noise; else the arm is falling or pushed.
+MAX_JOINT_SPEED_RAD_S = 10.0
+LEAP_MARGIN_RAD = 0.05
 # Damping of the Jacobian's inverse in driver mode (m): bounded joint speed near a
 # singularity (arm straight or folded), exact far from one.
 DRIVER_DAMPING_M = 0.05
@@ -81,12 +86,15 @@ class SensorReading:
     """One sample of the arm's sensors (the node builds it from joint_states and encoders).
 
     ``encoder_rad`` may hold NaN when the encoders are missing: the filter skips them.
-    ``ArmPlant.read()`` returns an object with the same fields.
+    ``sampled_s``: when the sensors took it on their own clock (the message's stamp; only
+    differences are used), NaN if unknown. ``ArmPlant.read()`` returns an object with the
+    same fields (but ``sampled_s``).
     """
 
     potentiometer_rad: tuple[float, float]
     velocity_rad_s: tuple[float, float]
     encoder_rad: tuple[float, float] = (math.nan, math.nan)
+    sampled_s: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -322,6 +330,7 @@ class ArmController:
         self.estimate_time_s: Optional[float] = None
         self.last_reading_s = -math.inf
         self.last_potentiometer: Optional[np.ndarray] = None
+        self.last_sampled_s = math.nan  # the last reading's time on the sensors' clock
         self.jumped = False             # the filter re-initialised: the arm is elsewhere
         self.voltage = np.zeros(2)
         self.feedforward_v = np.zeros(2)
@@ -644,7 +653,10 @@ class ArmController:
         taken_s = now_s if reading_time_s is None else min(reading_time_s, now_s)
         velocity = np.asarray(reading.velocity_rad_s, float).reshape(2)
         encoder = np.asarray(reading.encoder_rad, float).reshape(2)
+        sampled_s = float(getattr(reading, 'sampled_s', math.nan))
+        leapt = self._leapt(pot, taken_s, sampled_s)
         self.last_reading_s = taken_s
+        self.last_sampled_s = sampled_s
         self.last_potentiometer = pot
         if self.estimate_time_s is None:
             self.estimator.reset(pot, np.where(np.isfinite(encoder), encoder, 0.0))
@@ -655,21 +667,40 @@ class ArmController:
                 self.estimate_time_s = taken_s
             resets = self.estimator.jump_count
             self.estimator.update(pot, velocity, encoder)
-            self.jumped |= self.estimator.jump_count > resets
+            self.jumped |= self.estimator.jump_count > resets and leapt
         if now_s > self.estimate_time_s:
             self.estimator.predict(self.voltage, now_s - self.estimate_time_s)
             self.estimate_time_s = now_s
 
+    def _leapt(self, pot, taken_s: float, sampled_s: float) -> bool:
+        """The potentiometers moved farther since the last reading than the arm can move: it
+        was put somewhere (the sim reset or restarted), not driven or dropped there. A drop --
+        the arm failing to follow -- is the tracking-error rule's to judge, not a new hold.
+
+        The interval is the longer of arrival and sampling: readings delayed and delivered
+        together (a loaded machine) arrive close but were taken far apart."""
+        if self.last_potentiometer is None:
+            return True
+        interval_s = max(taken_s - self.last_reading_s, 0.0)
+        if math.isfinite(sampled_s - self.last_sampled_s):
+            interval_s = max(interval_s, sampled_s - self.last_sampled_s)
+        step = float(np.max(np.abs(pot - self.last_potentiometer)))
+        return step > MAX_JOINT_SPEED_RAD_S * interval_s + LEAP_MARGIN_RAD
+
     def _supervise(self, now_s: float) -> None:
         """Sensors, joint limits, planner timeout, arrival, dwell, the next goal."""
-        fresh = now_s - self.last_reading_s <= self.config.joint_state_timeout_s
+        # The command sent now holds for a period: stop now if by its end the last reading
+        # would be older than the timeout, so commanding ends within joint_state_timeout_s.
+        age_s = now_s - self.last_reading_s
+        fresh = age_s + self.period_s <= self.config.joint_state_timeout_s
         if not fresh and self.machine.can(Trigger.SENSORS_LOST):
             self.pending, self._outbox = None, []
             if self.current_goal is not None:       # resumed when the sensors return
                 self.queue.appendleft(self.current_goal)
                 self.current_goal = None
             self._fire(Trigger.SENSORS_LOST)
-            self.last_error = (f'no joint states for {self.config.joint_state_timeout_s:g} s')
+            self.last_error = (f'no joint states for {age_s:.3f} s (limit '
+                               f'{self.config.joint_state_timeout_s:g} s)')
             self._say(now_s, 'error', f'{self.last_error}: sending 0 V until they return')
         if fresh and self.state == ArmState.NO_SENSORS:
             self._fire(Trigger.SENSORS_BACK)

@@ -1,6 +1,8 @@
 """What every node shell shares: parameters from the one file, QoS by use, and main()."""
 
 import math
+from pathlib import Path
+import sys
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
@@ -8,6 +10,7 @@ import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+import yaml
 
 from arm_control.config import (default_parameter_file, parameter_descriptions,
                                 ParameterError, read_parameter_file)
@@ -63,6 +66,28 @@ def status(node, level, message: str, values: dict) -> DiagnosticStatus:
         values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
 
 
+def _parameters_without_value(argv) -> list:
+    """The parameters given no value in the --params-file files of ``argv`` ('name' quoted):
+    rcl refuses such a file but names only the line."""
+    def empty(tree, prefix):
+        for key, value in tree.items():
+            if isinstance(value, dict):
+                yield from empty(value, f'{prefix}{key}.')
+            elif value is None:
+                yield f"'{prefix}{key}'"
+    names = []
+    for flag, path in zip(argv, argv[1:]):
+        try:
+            document = yaml.safe_load(Path(path).read_text()) if flag == '--params-file' \
+                else None
+        except (OSError, yaml.YAMLError):
+            continue
+        for section in document.values() if isinstance(document, dict) else ():
+            if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
+                names += empty(section['ros__parameters'], '')
+    return names
+
+
 def run(node_class, args=None) -> int:
     """The Jazzy main() shape: construct, spin, clean up on every exit path.
 
@@ -71,7 +96,9 @@ def run(node_class, args=None) -> int:
     try:
         rclpy.init(args=args)
     except Exception as error:      # a parameter file rcl cannot parse, a bad --ros-args
-        rclpy.logging.get_logger(node_class.__name__).fatal(f'cannot start: {error}')
+        empty = _parameters_without_value(sys.argv if args is None else args)
+        named = f"; parameter {', '.join(empty)} has no value" if empty else ''
+        rclpy.logging.get_logger(node_class.__name__).fatal(f'cannot start: {error}{named}')
         return 2
     node = None
     try:

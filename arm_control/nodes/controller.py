@@ -30,6 +30,7 @@ from nav_msgs.srv import GetPlan
 import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import uninstall_signal_handlers
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, String
@@ -43,8 +44,18 @@ from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run,
 from arm_control.planning.planner import waypoints_from_poses
 
 FRAME = 'arm_base'
-EVENT_QOS_DEPTH = 50
+EVENT_QOS_DEPTH = 1000           # every event of a burst (a flood of goals) reaches listeners
 SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V command to arrive
+# No sensor of this arm reads an angle beyond two turns either way, nor a joint speed beyond
+# this (the motors' free speed through the gearbox is about 3.5 rad/s): such a value is a
+# malformed message, not a reading. A joint a little past its limit is real: it e-stops.
+MAX_SENSOR_ANGLE_RAD = 4.0 * math.pi
+MAX_SENSOR_SPEED_RAD_S = 100.0
+# Events logged at most this many per window (errors always): the rest are counted.
+LOG_LINES_PER_WINDOW = 20
+LOG_WINDOW_S = 1.0
+# Goals wait in DDS this many deep: a burst (a script, a flood) is answered, not dropped.
+GOALS = QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE)
 
 
 class ServicePlan:
@@ -67,6 +78,36 @@ def joint_pair(msg: JointState, field: str):
     if len(values) != 2:
         return None
     return values
+
+
+class LogBudget:
+    """At most ``lines`` log lines per window of ``window_s``; the rest are counted."""
+
+    def __init__(self, lines: int, window_s: float):
+        self.lines, self.window_s = lines, window_s
+        self.window_start_s = -math.inf
+        self.used = self.left_out = 0
+
+    def roll(self, now_s: float) -> int:
+        """Start a new window if this one is over; return how many the old one left out."""
+        if now_s - self.window_start_s < self.window_s:
+            return 0
+        left_out, self.left_out = self.left_out, 0
+        self.window_start_s, self.used = now_s, 0
+        return left_out
+
+    def take(self) -> bool:
+        """One more line in this window: may it be logged?"""
+        self.used += 1
+        if self.used > self.lines:
+            self.left_out += 1
+            return False
+        return True
+
+
+def within(values, bound: float) -> bool:
+    """Every value finite and within ±bound."""
+    return all(math.isfinite(v) and abs(v) <= bound for v in values)
 
 
 def yaw_of(q) -> float:
@@ -110,6 +151,8 @@ class ControllerNode(Node):
         self.timed_plans = deque()          # from the worker thread to the loop
         self.workers = ThreadPoolExecutor(max_workers=1, thread_name_prefix='timing')
         self.last_state = None
+        self.log_budget = LogBudget(LOG_LINES_PER_WINDOW, LOG_WINDOW_S)
+        self.estop_message = ''
         self.last_queue_version = -1
         self.tick_periods_s, self.compute_s = [], []
         self.last_tick = None
@@ -123,7 +166,7 @@ class ControllerNode(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(JointState, 'joint_states', self.on_joint_states, STATE_STREAM)
         self.create_subscription(JointState, 'motor_encoders', self.on_encoders, STATE_STREAM)
-        self.create_subscription(PointStamped, 'goal_point', self.on_goal_point, COMMANDS)
+        self.create_subscription(PointStamped, 'goal_point', self.on_goal_point, GOALS)
         self.create_subscription(String, 'goal_preset', self.on_goal_preset, COMMANDS)
         self.create_subscription(TwistStamped, 'driver_velocity', self.on_driver, COMMANDS)
         self.plan_client = self.create_client(GetPlan, 'plan_path')
@@ -152,26 +195,33 @@ class ControllerNode(Node):
     @guarded
     def on_joint_states(self, msg: JointState) -> None:
         position = joint_pair(msg, 'position')
-        if position is None or not all(math.isfinite(p) for p in position):
-            self.warn_bad(f'ignored joint_states: expected finite positions of '
-                          f'{list(JOINT_NAMES)}, got names={list(msg.name)} '
-                          f'position={list(msg.position)}')
-            return
         velocity = joint_pair(msg, 'velocity') or [math.nan, math.nan]
+        if position is None or not within(position, MAX_SENSOR_ANGLE_RAD) or not within(
+                [v for v in velocity if not math.isnan(v)], MAX_SENSOR_SPEED_RAD_S):
+            self.warn_bad(f'ignored joint_states: expected finite positions of '
+                          f'{list(JOINT_NAMES)} within {MAX_SENSOR_ANGLE_RAD:.1f} rad '
+                          f'(velocities, if any, within {MAX_SENSOR_SPEED_RAD_S:g} rad/s), '
+                          f'got names={list(msg.name)} position={list(msg.position)} '
+                          f'velocity={list(msg.velocity)}')
+            return
         now = self.now_s()
         encoder = [math.nan, math.nan]
         if self.encoders is not None and now - self.encoders[1] <= \
                 self.config.joint_state_timeout_s:
             encoder = self.encoders[0]
-        self.reading = (SensorReading(tuple(position), tuple(velocity), tuple(encoder)), now)
+        stamp = msg.header.stamp
+        sampled = stamp.sec + 1e-9 * stamp.nanosec if stamp.sec or stamp.nanosec else math.nan
+        self.reading = (SensorReading(tuple(position), tuple(velocity), tuple(encoder),
+                                      sampled), now)
         self.joint_states_s = now
 
     @guarded
     def on_encoders(self, msg: JointState) -> None:
         position = joint_pair(msg, 'position')
-        if position is None or not all(math.isfinite(p) for p in position):
+        if position is None or not within(position, MAX_SENSOR_ANGLE_RAD):
             self.warn_bad(f'ignored motor_encoders: expected finite positions of '
-                          f'{list(JOINT_NAMES)}, got {list(msg.position)}')
+                          f'{list(JOINT_NAMES)} within {MAX_SENSOR_ANGLE_RAD:.1f} rad, '
+                          f'got {list(msg.position)}')
             return
         self.encoders = (position, self.now_s())
 
@@ -252,6 +302,11 @@ class ControllerNode(Node):
         self.compute_s.append(time.perf_counter() - began)
 
     def publish_voltage(self, voltage) -> None:
+        """Command the motors -- once the arm is ours: before the first joint state there is
+        nothing to say, and a 0 V command would release a sim that rests the arm until the
+        first command arrives (``rest_until_first_command``), dropping it at bring-up."""
+        if self.core.estimate is None:
+            return
         self.voltage_pub.publish(Float64MultiArray(data=[float(v) for v in voltage]))
 
     def send_plan_requests(self) -> None:
@@ -316,8 +371,16 @@ class ControllerNode(Node):
         self.estimate_pub.publish(self.joint_state(estimate[:2], estimate[2:]))
 
     def publish_events(self) -> None:
+        """Every event on ~/events; in the log, errors always, the rest within a budget (a
+        flood of goals must not become a flood of lines), with a count of what was left out."""
         log = self.get_logger()
         for event in self.core.take_events():
+            self.events_pub.publish(String(data=event.message))
+            if event.message.startswith('E-STOP'):      # kept for diagnostics until reset
+                self.estop_message = event.message.split(';')[0]
+            self.say_left_out()
+            if not self.log_budget.take() and event.level != 'error':
+                continue
             # rclpy ties a severity to its call site: one call per level.
             if event.level == 'info':
                 log.info(event.message)
@@ -325,7 +388,13 @@ class ControllerNode(Node):
                 log.warning(event.message)
             else:
                 log.error(event.message)
-            self.events_pub.publish(String(data=event.message))
+
+    def say_left_out(self) -> None:
+        left_out = self.log_budget.roll(time.monotonic())
+        if left_out:
+            self.get_logger().warning(
+                f'{left_out} more events in the last {LOG_WINDOW_S:g} s not logged (too many '
+                'to log; every one is on ~/events)')
 
     def publish_state(self) -> None:
         if self.core.state != self.last_state:
@@ -342,6 +411,7 @@ class ControllerNode(Node):
 
     @guarded
     def publish_diagnostics(self) -> None:
+        self.say_left_out()
         now = self.now_s()
         periods, self.tick_periods_s = self.tick_periods_s, []
         compute, self.compute_s = self.compute_s, []
@@ -349,8 +419,8 @@ class ControllerNode(Node):
         level, message = DiagnosticStatus.OK, str(state)
         if state in (ArmState.ERROR, ArmState.NO_SENSORS):
             level, message = DiagnosticStatus.WARN, f'{state}: {self.core.last_error}'
-        elif state == ArmState.ESTOPPED:
-            level, message = DiagnosticStatus.ERROR, self.core.last_error
+        elif state == ArmState.ESTOPPED:      # why, even after goals rejected since
+            level, message = DiagnosticStatus.ERROR, self.estop_message or self.core.last_error
         worst = max(periods, default=math.nan)
         if worst > 3 * self.period_s:
             level = max(level, DiagnosticStatus.WARN)

@@ -1,0 +1,314 @@
+"""sim, planner and controller as processes for a whole test module, seen by one probe.
+
+``ArmRig`` starts the installed executables on one ROS domain, restarts, pauses (SIGSTOP)
+and resumes them, reads their memory from /proc, and keeps what the probe hears with the
+time it arrived (``time.monotonic()``): ground truth, joint states, voltage commands, the
+arm's state, the controller's events, queue and diagnostics.
+
+Run as a script, ``python arm_rig.py flood DOMAIN RATE_HZ SECONDS`` publishes goals of every
+kind (good, NaN, inf, huge, wrong frame, z off the plane, out of reach, forbidden) at
+RATE_HZ for SECONDS from a process of its own, and prints how many it sent.
+"""
+
+import math
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PointStamped
+from nav_msgs.msg import Path as PathMsg
+from nav_msgs.srv import GetPlan
+import numpy as np
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+from std_srvs.srv import Trigger
+
+from arm_control import config
+from arm_control.nodes.common import COMMANDS, LATCHED
+
+START_Q = np.array(config.load('sim')[1].initial_position)
+DEG = math.pi / 180.0
+# The flood's publisher keeps its goals until the controller has them (a user's script
+# with COMMANDS' depth of 10 loses some to overwriting when the subscriber falls behind).
+FLOOD_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+
+# Bad goals of every kind, each with words its rejection must contain.
+BAD_GOALS = [
+    (dict(x=math.nan, y=1.0), 'not a finite number'),
+    (dict(x=1.0, y=math.inf), 'not a finite number'),
+    (dict(x=-math.inf, y=1.0, z=math.nan), 'not a finite number'),
+    (dict(x=1e300, y=-1e300), 'out of reach'),
+    (dict(x=1.0, y=1.0, frame='map'), "frame 'map'"),
+    (dict(x=1.0, y=1.0, z=0.05), 'z = 0.0500 m'),
+    (dict(x=3.0, y=0.0), 'out of reach'),
+    (dict(x=1.0, y=-0.5), 'forbidden space'),
+]
+
+
+def point(x, y, z=0.0, frame='arm_base') -> PointStamped:
+    message = PointStamped()
+    message.header.frame_id = frame
+    message.point.x, message.point.y, message.point.z = float(x), float(y), float(z)
+    return message
+
+
+class Heard(list):
+    """(arrival time, message) pairs, in order."""
+
+    def messages(self, since_s=-math.inf):
+        return [m for t, m in self if t >= since_s]
+
+    def last(self):
+        return self[-1][1] if self else None
+
+
+def diagnostic_values(message: DiagnosticArray, name: str) -> dict:
+    for item in message.status:
+        if item.name == name:
+            return {'level': int.from_bytes(item.level, 'little')
+                    if isinstance(item.level, bytes) else int(item.level),
+                    'message': item.message, **{kv.key: kv.value for kv in item.values}}
+    return {}
+
+
+def rss_mb(pid: int) -> float:
+    """Resident memory of a process (VmRSS in /proc/<pid>/status), MB; NaN once it is gone."""
+    try:
+        status = Path(f'/proc/{pid}/status').read_text()
+    except OSError:
+        return math.nan
+    for line in status.splitlines():
+        if line.startswith('VmRSS:'):
+            return int(line.split()[1]) / 1024.0
+    return math.nan
+
+
+def periods(times) -> np.ndarray:
+    return np.diff(np.asarray(times, float))
+
+
+class ArmRig:
+    """The three nodes on ``domain``; ``probe`` (ros_harness.Probe) listens and speaks."""
+
+    NODES = ('sim', 'planner', 'controller')
+
+    def __init__(self, domain: int, probe, log_dir: Path, node_args=None):
+        from ros_harness import NodeProcess
+        self._node_process = NodeProcess
+        self.domain = domain
+        self.probe = probe
+        self.log_dir = Path(log_dir)
+        self.node_args = dict(node_args or {})
+        self.processes = {}
+        self.retired = []
+        node = probe.node
+        self.truth = self._hear(JointState, '/sim/ground_truth', 10)
+        self.joint_states = self._hear(JointState, '/joint_states', 10)
+        self.voltages = self._hear(Float64MultiArray, '/voltage_command', COMMANDS)
+        self.states = self._hear(String, '/arm_state', LATCHED)
+        self.events = self._hear(String, '/controller/events', 1000)
+        self.queue = self._hear(PathMsg, '/controller/goal_queue', LATCHED)
+        self.diagnostics = self._hear(DiagnosticArray, '/diagnostics', 50)
+        self.goal_pub = node.create_publisher(PointStamped, '/goal_point', COMMANDS)
+        self.plan_client = node.create_client(GetPlan, '/plan_path')
+
+    def _hear(self, msg_type, topic, qos) -> Heard:
+        heard = Heard()
+        self.probe.node.create_subscription(
+            msg_type, topic, lambda m: heard.append((time.monotonic(), m)), qos)
+        return heard
+
+    # ------------------------------------------------------------------ processes
+
+    def start(self, name: str, *ros_args):
+        """Start (or start again) the node ``name``; the old process is kept for its log."""
+        old = self.processes.get(name)
+        if old is not None:
+            self.retired.append(old)
+        args = tuple(self.node_args.get(name, ())) + ros_args
+        log_dir = self.log_dir / f'{name}_{len(self.retired)}'
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.processes[name] = self._node_process(name, self.domain, args, log_dir)
+        return self.processes[name]
+
+    def start_all(self) -> None:
+        for name in self.NODES:
+            self.start(name)
+
+    def signal(self, name: str, signum) -> None:
+        os.kill(self.processes[name].process.pid, signum)
+
+    def pause(self, name: str) -> None:
+        self.signal(name, signal.SIGSTOP)
+
+    def resume(self, name: str) -> None:
+        self.signal(name, signal.SIGCONT)
+
+    def kill(self, name: str) -> None:
+        """SIGKILL: a crash, no goodbye (no 0 V on the way out)."""
+        process = self.processes[name]
+        self.signal(name, signal.SIGCONT)
+        self.signal(name, signal.SIGKILL)
+        process.process.wait(10)
+
+    def rss_mb(self, name: str) -> float:
+        return rss_mb(self.processes[name].process.pid)
+
+    def output(self, name: str) -> str:
+        return self.processes[name].output()
+
+    def close(self) -> None:
+        for process in list(self.processes.values()):
+            try:
+                os.kill(process.process.pid, signal.SIGCONT)
+            except ProcessLookupError:
+                pass
+            process.stop()
+
+    # ------------------------------------------------------------------ waiting
+
+    def spin_until(self, condition, timeout_s: float) -> bool:
+        return self.probe.spin_until(condition, timeout_s)
+
+    def spin_for(self, duration_s: float) -> None:
+        self.probe.spin_for(duration_s)
+
+    @property
+    def state(self) -> str:
+        message = self.states.last()
+        return message.data if message is not None else ''
+
+    def wait_state(self, state: str, timeout_s: float = 10.0, since_s=-math.inf) -> bool:
+        return self.spin_until(lambda: self.state == state and self.states[-1][0] >= since_s
+                               if since_s > -math.inf else self.state == state, timeout_s)
+
+    def said(self, words: str, since_s=-math.inf) -> list:
+        return [m.data for m in self.events.messages(since_s) if words in m.data]
+
+    def wait_said(self, words: str, timeout_s: float = 10.0, since_s=-math.inf,
+                  count: int = 1) -> bool:
+        return self.spin_until(lambda: len(self.said(words, since_s)) >= count, timeout_s)
+
+    def said_at(self, words: str, since_s=-math.inf) -> float:
+        """When the first event with ``words`` since ``since_s`` was heard."""
+        return min(t for t, m in self.events if t >= since_s and words in m.data)
+
+    def event_log(self, since_s=-math.inf) -> list:
+        return [m.data for m in self.events.messages(since_s)]
+
+    def ready(self, timeout_s: float = 40.0) -> None:
+        """Wait for the planner and the controller, then put the arm at its start, held."""
+        assert self.spin_until(lambda: self.plan_client.service_is_ready()
+                               and self.state == 'waiting'
+                               and self.goal_pub.get_subscription_count() > 0, timeout_s), \
+            f'not ready: arm_state {self.state!r}, planner {self.plan_client.service_is_ready()}'
+        self.reset_sim()
+
+    def reset_sim(self) -> None:
+        assert self.call(Trigger, '/sim/reset').success
+        assert self.wait_held(START_Q), (
+            f'the controller did not take over the arm: arm_state {self.state!r}, true '
+            f'position {self.truth.last().position if self.truth else None}, events '
+            f'{self.event_log()}, processes alive '
+            f'{ {n: p.alive() for n, p in self.processes.items()} }')
+
+    def wait_held(self, q, tolerance_rad=2.0 * DEG, samples=25, timeout_s=10.0) -> bool:
+        """Wait for ``samples`` true states in a row within tolerance of ``q``."""
+        q = np.asarray(q, float)
+        since = time.monotonic()
+
+        def held():
+            recent = self.truth.messages(since)[-samples:]
+            return len(recent) == samples and all(
+                np.max(np.abs(np.array(m.position) - q)) < tolerance_rad for m in recent)
+        return self.spin_until(held, timeout_s)
+
+    def wait_still(self, samples=25, speed_rad_s=0.05, timeout_s=10.0) -> bool:
+        since = time.monotonic()
+
+        def still():
+            recent = self.truth.messages(since)[-samples:]
+            return len(recent) == samples and all(
+                np.max(np.abs(np.array(m.velocity))) < speed_rad_s for m in recent)
+        return self.spin_until(still, timeout_s)
+
+    def true_q(self) -> np.ndarray:
+        return np.array(self.truth.last().position)
+
+    def call(self, srv_type, name: str, request=None, timeout_s: float = 10.0):
+        return self.probe.call(srv_type, name, request or srv_type.Request(), timeout_s)
+
+    def send(self, x, y, z=0.0, frame='arm_base') -> None:
+        self.goal_pub.publish(point(x, y, z, frame))
+
+    def controller_diagnostics(self, since_s=-math.inf) -> list:
+        """The controller's diagnostic values (a dict per message) since ``since_s``."""
+        out = []
+        for message in self.diagnostics.messages(since_s):
+            values = diagnostic_values(message, '/controller')
+            if values:
+                out.append(values)
+        return out
+
+    def node_diagnostics(self, name: str, since_s=-math.inf) -> list:
+        out = []
+        for message in self.diagnostics.messages(since_s):
+            values = diagnostic_values(message, name)
+            if values:
+                out.append(values)
+        return out
+
+
+# ---------------------------------------------------------------------- the flood
+
+
+def flood_goals():
+    """Goals for the flood, cycling: good ones (they fill the queue; high, front and back)
+    and bad ones of every kind."""
+    good = [dict(x=1.1, y=0.9), dict(x=0.9, y=1.5), dict(x=-0.6, y=1.5)]
+    return good + [dict(goal) for goal, _ in BAD_GOALS]
+
+
+def flood(domain: int, rate_hz: float, seconds: float) -> int:
+    """Publish goals at ``rate_hz`` for ``seconds`` (in bursts every 10 ms); return the
+    count sent."""
+    import rclpy
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node('flood', context=context)
+    publisher = node.create_publisher(PointStamped, '/goal_point', FLOOD_QOS)
+    deadline = time.monotonic() + 10.0
+    while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    goals = [point(**goal) for goal in flood_goals()]
+    sent = 0
+    began = time.monotonic()
+    while True:
+        elapsed = time.monotonic() - began
+        if elapsed >= seconds:
+            break
+        due = min(int(elapsed * rate_hz) + 1, int(seconds * rate_hz))
+        while sent < due:
+            publisher.publish(goals[sent % len(goals)])
+            sent += 1
+        time.sleep(0.01)
+    node.destroy_node()
+    rclpy.try_shutdown(context=context)
+    return sent
+
+
+def start_flood(domain: int, rate_hz: float, seconds: float) -> subprocess.Popen:
+    from ros_harness import ros_environment
+    return subprocess.Popen([sys.executable, __file__, 'flood', str(domain), str(rate_hz),
+                             str(seconds)], env=ros_environment(domain),
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+if __name__ == '__main__':
+    if sys.argv[1:2] == ['flood']:
+        print(f'sent {flood(int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4]))}')

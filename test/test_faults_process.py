@@ -1,0 +1,246 @@
+"""Faults through the real processes: each one stops the arm safely, says why, and passes.
+
+- joint states stop (the sim paused with SIGSTOP): the controller sends 0 V within
+  ``joint_state_timeout_s`` of the last one and says why; when they return it carries on;
+- the planner slow (paused) or down: a goal waits ``planner_timeout_s`` and is rejected with
+  the reason -- the arm does not move; the planner back, goals are planned again;
+- the sim restarts mid-motion: the controller holds the arm where the new sim has it and
+  finishes the queue;
+- the controller crashes mid-motion (SIGKILL) and is started again: it comes back waiting,
+  holding the arm where it finds it, with no memory of the old motion;
+- e-stop by service, and by the tracking-error rule (a sim whose forearm is far heavier than
+  the controller's model: the arm cannot follow).
+
+Where the arm went is read from the sim's true state, which the controller never sees.
+The first five share one launch of sim, planner and controller, in order.
+"""
+
+import math
+import time
+
+from arm_rig import ArmRig, DEG
+from nav_msgs.srv import GetPlan
+import numpy as np
+import pytest
+from std_srvs.srv import Trigger
+
+from arm_control import config
+from arm_control.planning.cspace import ForbiddenSpace
+
+ARM, CONTROLLER = config.load('controller')
+FORBIDDEN = ForbiddenSpace(ARM)
+TIMEOUT_S = CONTROLLER.joint_state_timeout_s
+# Probe-side slack on top of a bound the controller keeps: DDS delivery both ways, and the
+# probe's own scheduling on a shared machine.
+PROBE_SLACK_S = 0.1
+
+
+@pytest.fixture(scope='module')
+def rig(tmp_path_factory):
+    from ros_harness import Probe, ros_domain
+    with ros_domain() as domain:
+        probe = Probe(domain)
+        rig = ArmRig(domain, probe, tmp_path_factory.mktemp('faults'))
+        try:
+            rig.start_all()
+            rig.ready()
+            yield rig
+        finally:
+            rig.close()
+            probe.close()
+
+
+def assert_never_forbidden(messages):
+    q = np.array([m.position for m in messages]).reshape(-1, 2)
+    free = np.asarray(FORBIDDEN.is_free(q))
+    assert np.all(free), (f'{np.sum(~free)} true samples in forbidden space, first: '
+                          f'{FORBIDDEN.why_forbidden(q[~free][0])}')
+
+
+def zero(message) -> bool:
+    return list(message.data) == [0.0, 0.0]
+
+
+def test_joint_states_stop_then_return(rig):
+    began = time.monotonic()
+    goals = [(-1.0, 1.0), (1.1, 0.9)]
+    for goal in goals:
+        rig.send(*goal)
+    assert rig.wait_state('tracking', 10.0)
+    rig.spin_for(0.4)                                      # mid-motion
+    rig.pause('sim')
+    paused = time.monotonic()
+    rig.spin_for(1.5)
+    rig.resume('sim')
+
+    last_state_s = max(t for t, _ in rig.joint_states if t < paused + 0.5)
+    first_zero_s = min((t for t, m in rig.voltages if t > last_state_s - 0.02 and zero(m)),
+                       default=math.inf)
+    after = [m for t, m in rig.voltages if first_zero_s <= t <= paused + 1.5]
+    said = rig.said('no joint states', began)
+    print(f'joint states stopped: first 0 V heard {1000 * (first_zero_s - last_state_s):.0f} ms'
+          f' after the last joint state; {len(after)} commands while they were away, '
+          f'{sum(not zero(m) for m in after)} not 0 V; the controller said {said}')
+    assert first_zero_s - last_state_s <= TIMEOUT_S + PROBE_SLACK_S
+    assert after and all(zero(m) for m in after)
+    assert said and 'sending 0 V' in said[0], rig.event_log(began)
+    assert 'no_sensors' in [m.data for m in rig.states.messages(began)]
+    # Back by itself: the interrupted goal and the queue are finished.
+    assert rig.spin_until(lambda: len(rig.said('reached', began)) == len(goals), 40.0), \
+        rig.event_log(began)
+    assert 'joint states arriving' in ' '.join(rig.event_log(began))
+    assert any(d['level'] == 1 and 'no_sensors' in d['message']    # 1.5 s: one at least
+               for d in rig.controller_diagnostics(paused))
+    assert_never_forbidden(rig.truth.messages(began))
+
+
+def test_planner_slow_or_down_rejects_the_goal_in_bounded_time(rig):
+    assert rig.wait_still()
+    held_q = rig.true_q()
+    timeout_s = CONTROLLER.planner_timeout_s
+
+    rig.pause('planner')                                   # slow: there, but no answer
+    sent = time.monotonic()
+    rig.send(0.9, 1.5)
+    assert rig.wait_said('did not answer', timeout_s + 5.0, sent), rig.event_log(sent)
+    waited_s = min(t for t, m in rig.events if t > sent and 'did not answer' in m.data) - sent
+    assert rig.wait_state('error', 2.0)
+    rig.resume('planner')                                  # its late answer is ignored
+    rig.spin_for(1.5)
+    moved = np.max(np.abs(np.array([m.position for m in rig.truth.messages(sent)]) - held_q))
+    print(f'planner paused: rejected {waited_s:.2f} s after the goal (timeout {timeout_s:g} s);'
+          f' the arm moved {math.degrees(moved):.2f} deg')
+    assert timeout_s - 0.05 <= waited_s <= timeout_s + 1.0
+    assert moved < 1.0 * DEG, 'a blind move: the arm went without a plan'
+    assert rig.spin_until(lambda: any('did not answer' in d['message']
+                                      for d in rig.controller_diagnostics(sent)), 3.0)
+
+    rig.processes['planner'].stop()                        # down
+    down = time.monotonic()
+    rig.send(0.9, 1.5)
+    assert rig.wait_said('did not answer', timeout_s + 5.0, down), rig.event_log(down)
+    said = rig.said('did not answer', down)[0]
+    print(f'planner down: {said}')
+    moved = np.max(np.abs(np.array([m.position for m in rig.truth.messages(sent)]) - held_q))
+    assert moved < 1.0 * DEG, 'a blind move: the arm went without a plan'
+
+    rig.start('planner')                                   # back: goals go again
+    assert rig.spin_until(rig.plan_client.service_is_ready, 30.0)
+    rig.call(GetPlan, '/plan_path', timeout_s=30.0)       # answering (a busy machine may
+    assert rig.wait_still()                                # take a while to start it)
+    back = time.monotonic()
+    rig.send(0.9, 1.5)
+    assert rig.wait_said('reached', 20.0, back), rig.event_log(back)
+
+
+def test_sim_restart_mid_motion(rig):
+    began = time.monotonic()
+    goals = [(-1.0, 1.0), (1.1, 0.9)]
+    for goal in goals:
+        rig.send(*goal)
+    assert rig.wait_state('tracking', 10.0)
+    rig.spin_for(0.3)
+    rig.processes['sim'].stop()
+    rig.start('sim')
+    assert rig.spin_until(lambda: len(rig.said('reached', began)) == len(goals), 60.0), \
+        rig.event_log(began)
+    states = [m.data for m in rig.states.messages(began)]
+    assert 'no_sensors' in states and 'estopped' not in states, states
+    assert_never_forbidden(rig.truth.messages(began))
+
+
+def test_controller_restart_mid_motion_comes_back_holding(rig):
+    began = time.monotonic()
+    rig.send(0.3, 1.75)                 # high, so the arm falls slowly with no controller
+    assert rig.wait_said('reached', 20.0, began), rig.event_log(began)
+    moving = time.monotonic()
+    rig.send(-0.3, 1.75)
+    rig.send(-1.0, 1.0)
+    assert rig.wait_state('tracking', 10.0, moving)
+    rig.spin_for(0.2)
+    rig.kill('controller')                                 # a crash: no 0 V on the way out
+    killed = time.monotonic()
+    rig.start('controller')
+    # The new process says its state (latched) at start, before its first command.
+    assert rig.spin_until(lambda: rig.states[-1][0] > killed, 30.0)
+    born = rig.states.messages(killed) and min(t for t, _ in rig.states if t > killed)
+    assert rig.spin_until(lambda: any(t > born for t, _ in rig.voltages), 10.0)
+    taken_s = min(t for t, _ in rig.voltages if t > born)
+    assert rig.spin_until(lambda: rig.truth.messages(taken_s), 5.0)
+    taken_q = np.array(rig.truth.messages(taken_s)[0].position)
+    assert rig.wait_state('waiting', 5.0, killed)
+    assert rig.wait_still(timeout_s=10.0)
+    held_q = rig.true_q()
+    states = [m.data for m in rig.states.messages(killed)]
+    assert rig.spin_until(lambda: rig.queue.messages(killed), 5.0)
+    queue = rig.queue.last()
+    print(f'controller restarted: took over {taken_s - killed:.2f} s after the crash at '
+          f'{np.round(np.degrees(taken_q), 1)} deg, held at {np.round(np.degrees(held_q), 1)}'
+          f' deg; states {states}')
+    assert set(states) <= {'no_sensors', 'waiting'}, 'it resumed an old motion'
+    assert not queue.poses
+    assert np.max(np.abs(held_q - taken_q)) < 10.0 * DEG, 'it did not hold where it found it'
+    # With no controller for seconds the arm may have fallen into forbidden space (to its
+    # hard stop): once held it is never pushed deeper, and the next goal takes it out.
+    held_s = time.monotonic()
+    held_depth_m = min(float(FORBIDDEN.lowest_point_m(held_q)), 0.0)
+    mark = time.monotonic()
+    rig.send(1.1, 0.9)                                     # and it works from there
+    assert rig.wait_said('reached', 30.0, mark), rig.event_log(killed)
+    lowest_m = [float(FORBIDDEN.lowest_point_m(m.position)) for m in rig.truth.messages(held_s)]
+    print(f'  lowest point at takeover {1000 * FORBIDDEN.lowest_point_m(taken_q):.0f} mm, '
+          f'held {1000 * held_depth_m:.0f} mm, after it {1000 * min(lowest_m):.0f} mm')
+    assert min(lowest_m) >= held_depth_m - 0.01
+    assert_never_forbidden(rig.truth.messages(rig.said_at('reached', mark)))
+
+
+def test_estop_by_service(rig):
+    began = time.monotonic()
+    rig.send(-1.0, 1.0)
+    rig.send(0.9, 1.5)
+    assert rig.wait_state('tracking', 10.0)
+    response = rig.call(Trigger, '/controller/estop')
+    stopped = time.monotonic()
+    assert response.success and 'E-STOP' in response.message
+    assert rig.wait_state('estopped', 2.0)
+    rig.spin_for(0.5)
+    after = [m for t, m in rig.voltages if t > stopped]
+    assert after and all(zero(m) for m in after)
+    assert not rig.queue.last().poses                      # the queue is cleared
+    rig.send(1.1, 0.9)
+    assert rig.wait_said('e-stopped', 3.0, stopped)
+    assert rig.spin_until(lambda: any(d['level'] == 2 and 'E-STOP' in d['message']
+                                      for d in rig.controller_diagnostics(stopped)), 3.0)
+    assert rig.call(Trigger, '/controller/reset').success
+    assert rig.wait_state('waiting', 3.0)
+    mark = time.monotonic()
+    rig.send(1.1, 0.9)
+    assert rig.wait_said('reached', 20.0, mark), rig.event_log(began)
+
+
+def test_estop_by_tracking_error(tmp_path):
+    """A forearm of 120 kg where the controller's model has 15 kg: the elbow's motor cannot
+    hold it level (471 N m against 385 N m at stall), it sinks, the tracking error grows past
+    its limit, and the controller e-stops."""
+    from ros_harness import Probe, ros_domain
+    with ros_domain() as domain:
+        probe = Probe(domain)
+        rig = ArmRig(domain, probe, tmp_path, node_args={'sim': ('-p', 'elbow.mass_kg:=120.0')})
+        try:
+            rig.start('sim')
+            rig.start('controller')
+            assert rig.spin_until(lambda: rig.state == 'estopped', 30.0), rig.event_log()
+            stopped = rig.states[-1][0]
+            # Said in its diagnostics (an early event may go before the probe hears it).
+            assert rig.spin_until(lambda: any(d['level'] == 2 for d in
+                                              rig.controller_diagnostics(stopped)), 3.0)
+            said = [d['message'] for d in rig.controller_diagnostics(stopped)][-1]
+            print(f'heavy forearm: {said}')
+            assert 'E-STOP: tracking error' in said and 'for 0.5 s' in said
+            assert 'E-STOP: tracking error' in rig.output('controller')
+            rig.spin_for(0.5)
+            after = [m for t, m in rig.voltages if t > stopped + 0.1]
+            assert after and all(zero(m) for m in after)
+        finally:
+            rig.close()
+            probe.close()

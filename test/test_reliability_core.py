@@ -1,0 +1,113 @@
+"""Fail-safe rules of the controller's core, in simulated time on the plant (no ROS).
+
+- commanding ends within ``joint_state_timeout_s`` of the last reading, not a period later;
+- an arm put elsewhere (a reset sim: the sensors leap) is held where it now is;
+- an arm that cannot follow (a forearm far heavier than the model) is e-stopped by the
+  tracking-error rule -- its fall is not mistaken for the arm having been put elsewhere.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from arm_control import config
+from arm_control.control.arm_controller import ArmController, SensorReading
+from arm_control.control.state_machine import ArmState
+from arm_control.model.plant import ArmPlant
+
+START = (1.5708, -1.5708)
+
+
+@pytest.fixture(scope='module')
+def controller_config():
+    return config.load('controller')[1]
+
+
+def run(core, plant, seconds, period_s, sensors=True, until=None):
+    """Step core and plant together; returns the times of the steps."""
+    times = []
+    for _ in range(round(seconds / period_s)):
+        reading = plant.read() if sensors else None
+        voltage = core.step(plant.time_s, reading)
+        times.append((plant.time_s, np.array(voltage)))
+        plant.set_voltage(voltage)
+        plant.advance(period_s)
+        if until is not None and until():
+            break
+    return times
+
+
+def test_commanding_ends_within_the_joint_state_timeout(arm, controller_config):
+    core = ArmController(arm, controller_config)
+    plant = ArmPlant(arm, START, seed=1)
+    period_s = 1.0 / controller_config.loop_rate_hz
+    run(core, plant, 0.5, period_s)
+    last_reading_s = plant.time_s - period_s
+    steps = run(core, plant, 0.5, period_s, sensors=False)
+    commanding = [t for t, v in steps if np.any(v != 0.0)]
+    # The last non-zero command is held one period: it must end within the timeout.
+    assert commanding
+    assert commanding[-1] + period_s - last_reading_s <= \
+        controller_config.joint_state_timeout_s + 1e-9
+    assert core.state == ArmState.NO_SENSORS
+    assert 'no joint states for 0.18' in core.last_error
+
+
+def test_an_arm_put_elsewhere_is_held_there(arm, controller_config):
+    core = ArmController(arm, controller_config)
+    plant = ArmPlant(arm, START, seed=2)
+    period_s = 1.0 / controller_config.loop_rate_hz
+    run(core, plant, 0.5, period_s)
+    elsewhere = (1.2, -1.0)                    # 22 deg and 33 deg away, in one sample
+    plant.reset(elsewhere)
+    run(core, plant, 2.0, period_s)
+    assert core.state == ArmState.WAITING
+    assert any('not where it was' in e.message for e in core.take_events())
+    assert np.max(np.abs(np.array(plant.state[:2]) - elsewhere)) < math.radians(2.0)
+
+
+def test_an_arm_that_cannot_follow_is_estopped(arm, controller_config):
+    heavy = dataclasses.replace(arm, elbow=dataclasses.replace(arm.elbow, mass_kg=200.0))
+    core = ArmController(arm, controller_config)           # its model: the 15 kg forearm
+    plant = ArmPlant(heavy, START, seed=3)
+    period_s = 1.0 / controller_config.loop_rate_hz
+    run(core, plant, 3.0, period_s, until=lambda: core.state == ArmState.ESTOPPED)
+    messages = [e.message for e in core.take_events()]
+    assert core.state == ArmState.ESTOPPED, messages
+    assert 'tracking error' in core.last_error
+    assert not any('not where it was' in m for m in messages)
+    # It fell under the heavy forearm before the rule fired, but no farther than needed:
+    # past the limit (20 deg) for the rule's time (0.5 s) at the speed it fell.
+    assert plant.time_s < 1.5
+
+
+def test_bunched_readings_are_not_a_leap(arm, controller_config):
+    """On a loaded machine readings arrive late and together: taken 0.1 s apart, received
+    a few ms apart. That is not the arm being put elsewhere: a heavy forearm that sinks while
+    they arrive so is still e-stopped by the tracking-error rule."""
+    heavy = dataclasses.replace(arm, elbow=dataclasses.replace(arm.elbow, mass_kg=200.0))
+    core = ArmController(arm, controller_config)
+    plant = ArmPlant(heavy, START, seed=4)
+    period_s = 1.0 / controller_config.loop_rate_hz
+    held = []                                   # (reading, taken at) not yet delivered
+    for index in range(round(3.0 / period_s)):
+        now = plant.time_s
+        r = plant.read()
+        held.append(SensorReading(r.potentiometer_rad, r.velocity_rad_s, r.encoder_rad, now))
+        reading, received = None, None
+        if index % 6 == 0:                      # the oldest of the burst, received now
+            reading, received = held[0], now
+        elif index % 6 == 1:                    # the newest, received 2 ms after it
+            reading, received = held[-1], now - period_s + 0.002
+            held = []
+        voltage = core.step(now, reading, received)
+        plant.set_voltage(voltage)
+        plant.advance(period_s)
+        if core.state == ArmState.ESTOPPED:
+            break
+    messages = [e.message for e in core.take_events()]
+    assert core.state == ArmState.ESTOPPED, messages
+    assert 'tracking error' in core.last_error
+    assert not any('not where it was' in m for m in messages)
