@@ -134,7 +134,8 @@ class _Reader:
 
     def numbers(self, name, length: int) -> tuple[float, ...]:
         value = self._raw(name)
-        if isinstance(value, (str, bytes)) or not hasattr(value, '__len__') or len(value) != length:
+        if (isinstance(value, (str, bytes)) or not hasattr(value, '__len__')
+                or len(value) != length):
             raise ParameterError(f"parameter '{name}' = {value!r}: expected {length} numbers")
         out = []
         for item in value:

@@ -42,12 +42,11 @@ import statistics
 import sys
 import time
 
-import numpy as np
-
 BENCH = Path(__file__).resolve().parent
 sys.path[:0] = [str(BENCH), str(BENCH.parent)]       # the suite beside, the package above
 
 from bench_trajectory import _start_configuration, Move, SUITE  # noqa: E402 (one suite)
+import numpy as np  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.arm_controller import ArmController  # noqa: E402

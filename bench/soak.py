@@ -12,9 +12,10 @@ Reported at the end:
 - goals: sent, reached, rejected or failed with their reasons (numbers blanked), dropped
   (cleared by an e-stop or the controller's queue full);
 - contact with forbidden space on ``/sim/ground_truth``, split by what the controller was
-  doing when the arm entered it: while commanding (must be zero), or while at 0 V
-  (e-stopped, no joint states: nothing holds a 45 kg arm up then; it falls as a real one
-  would, and is reported, not excused);
+  doing when the arm entered it: while commanding (must be zero); while at 0 V (e-stopped,
+  no joint states: nothing holds a 45 kg arm up then; it falls as a real one would), or
+  within a second after (the controller has it again, still braking that fall) -- reported,
+  not excused;
 - memory (RSS) of each node, minute by minute;
 - control-loop period: ``voltage_command`` as the probe hears it (median, p99, worst), and
   the controller's own worst period per second from its diagnostics.
@@ -44,12 +45,17 @@ import numpy as np  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from arm_control import config  # noqa: E402
+from arm_control.control.goals import GoalValidator  # noqa: E402
 from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
 from arm_control.planning.cspace import ForbiddenSpace  # noqa: E402
 
 ARM, CONTROLLER = config.load('controller')
 KINEMATICS = TwoLinkKinematics(ARM.shoulder.length_m, ARM.elbow.length_m)
 FORBIDDEN = ForbiddenSpace(ARM)
+VALIDATOR = GoalValidator(ARM)
+# Contact that begins this soon after a 0 V period is that fall carrying on (the controller
+# has the arm again, but it is still falling).
+FALL_CARRIES_ON_S = 1.0
 ZERO_VOLT_STATES = {'estopped', 'no_sensors', 'disabled'}
 # What happens each turn, with its weight.
 ACTIONS = {'good goal': 50, 'preset goal': 10, 'bad goal': 12, 'sim pause': 8,
@@ -58,13 +64,17 @@ MAX_QUEUED = 3                     # good goals are sent only while fewer wait
 
 
 def random_free_goal(rng: random.Random):
-    """The tool point of a random free configuration inside the joints' travel, with the
-    elbow and the tool 10 cm or more above the floor."""
+    """The tool point of a random free configuration inside the joints' travel, whose every
+    free elbow branch (the controller picks one) keeps the elbow and the tool 10 cm or more
+    above the floor: the default world has no clearance, so a goal held on the floor line
+    would touch it within the sensors' noise."""
     upper_m = ARM.shoulder.length_m
     while True:
         q = np.array([rng.uniform(j.min_angle_rad, j.max_angle_rad) for j in ARM.joints])
         x, y = KINEMATICS.forward(q)
-        if FORBIDDEN.is_free(q) and min(y, upper_m * np.sin(q[0])) > 0.1:
+        branches = VALIDATOR.free_configurations(x, y)
+        if FORBIDDEN.is_free(q) and branches and all(
+                min(y, upper_m * np.sin(b[0])) > 0.1 for b in branches):
             return float(x), float(y)
 
 
@@ -144,12 +154,15 @@ class Soak:
 
 def contact_runs(rig: ArmRig):
     """Runs of true samples in forbidden space: (start time, samples, deepest m, the
-    controller's state when it began)."""
+    controller's state when it began -- or 'after <0 V state>' when it began within
+    FALL_CARRIES_ON_S of one)."""
     times = np.array([t for t, _ in rig.truth])
     q = np.array([m.position for _, m in rig.truth])
     free = np.asarray(FORBIDDEN.is_free(q))
     lowest = np.asarray(FORBIDDEN.lowest_point_m(q))
     state_times = [t for t, _ in rig.states]
+    zero_volt_ends = [(t1, m0.data) for (_, m0), (t1, m1) in zip(rig.states, rig.states[1:])
+                      if m0.data in ZERO_VOLT_STATES and m1.data not in ZERO_VOLT_STATES]
     runs, start = [], None
     for index, ok in enumerate(free):
         if not ok and start is None:
@@ -158,6 +171,10 @@ def contact_runs(rig: ArmRig):
             end = index if ok else index + 1
             where = np.searchsorted(state_times, times[start], side='right') - 1
             state = rig.states[where][1].data if where >= 0 else ''
+            ends = [(t, zero) for t, zero in zero_volt_ends if t <= times[start]]
+            if state not in ZERO_VOLT_STATES and ends and \
+                    times[start] - ends[-1][0] <= FALL_CARRIES_ON_S:
+                state = f'after {ends[-1][1]}'
             runs.append((times[start], end - start, float(np.min(lowest[start:end])), state))
             start = None
     return runs
@@ -188,16 +205,26 @@ def report(soak: Soak, rig: ArmRig, minutes: float) -> None:
         print(f'| &nbsp;&nbsp;{reason} | {count} |')
 
     runs = contact_runs(rig)
-    commanding = [r for r in runs if r[3] not in ZERO_VOLT_STATES]
     at_zero = [r for r in runs if r[3] in ZERO_VOLT_STATES]
+    after_zero = [r for r in runs if r[3].startswith('after ')]
+    commanding = [r for r in runs if r not in at_zero and r not in after_zero]
     print('\n| contact with forbidden space (/sim/ground_truth) | entries | samples | '
           'deepest |\n|---|---|---|---|')
     for label, group in (('entered while the controller commanded (must be 0)', commanding),
                          ('entered while at 0 V (e-stopped / no joint states: it falls)',
-                          at_zero)):
+                          at_zero),
+                         (f'entered within {FALL_CARRIES_ON_S:g} s after 0 V (that fall, '
+                          'still braking)', after_zero)):
         deepest = f'{-1000 * min(r[2] for r in group):.0f} mm' if group else '-'
         print(f'| {label} | {len(group)} | {sum(r[1] for r in group)} | {deepest} |')
     print(f'| true samples in all | | {len(rig.truth)} | |')
+    for began_at, samples, deepest_m, state in commanding + after_zero:
+        before = [m.data for t, m in rig.events if t <= began_at][-3:]
+        done = [(round(t - soak.began, 1), what) for t, what in soak.log
+                if began_at - 3.0 <= t <= began_at]
+        print(f'contact at {began_at - soak.began:.1f} s in state {state!r}: '
+              f'{samples} samples, {1000 * -deepest_m:.0f} mm deep; events before: {before}; '
+              f'done in the 3 s before: {done}')
 
     print('\n| minute | sim RSS (MB) | planner RSS (MB) | controller RSS (MB) |\n'
           '|---|---|---|---|')

@@ -2,12 +2,12 @@
 
 import math
 
+from conftest import with_joint
 import numpy as np
 import pytest
 
 from arm_control.model.dynamics import ArmDynamics, rk4
 from arm_control.model.plant import ArmPlant
-from conftest import with_joint
 
 STEP_S = 0.001
 

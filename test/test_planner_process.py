@@ -78,8 +78,8 @@ def test_plans_over_the_top_and_latches_the_path_and_the_map(launch, probe, frc)
     np.testing.assert_allclose(to_tuples(paths[-1]), poses, atol=1e-12)
     grid_map = maps[-1]
     grid = pure.grid
-    assert (grid_map.info.width, grid_map.info.height) == (grid.shoulder.count,
-                                                          grid.elbow.count)
+    assert (grid_map.info.width, grid_map.info.height) == \
+        (grid.shoulder.count, grid.elbow.count)
     assert grid_map.info.resolution == pytest.approx(planner_config.grid_resolution_rad)
     data = np.array(grid_map.data).reshape(grid_map.info.height, grid_map.info.width)
     assert set(np.unique(data)) == {0, 100}

@@ -8,10 +8,10 @@ import pytest
 
 from arm_control import config
 from arm_control.config import Rectangle
-from arm_control.control.trajectory import (BlendedPath, time_optimal_trajectory,
-                                            Trajectory, TrajectoryError, TrajectoryLimits,
-                                            trajectory_voltage)
 from arm_control.control import trajectory as trajectory_module
+from arm_control.control.trajectory import (BlendedPath, time_optimal_trajectory,
+                                            Trajectory, trajectory_voltage,
+                                            TrajectoryError, TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.plant import ArmPlant
 from arm_control.planning.cspace import ForbiddenSpace

@@ -47,8 +47,9 @@ class ArmDynamics:
         self._m_elbow = mb * rb ** 2 + fore.inertia_about_com_kgm2
         self._g_shoulder = self.gravity * (ma * ra + mb * la)
         self._g_elbow = self.gravity * mb * rb
-        self.motors = tuple(GearMotor.from_datasheet(arm.motor, joint.motor_count, joint.gear_ratio)
-                            for joint in arm.joints)
+        self.motors = tuple(
+            GearMotor.from_datasheet(arm.motor, joint.motor_count, joint.gear_ratio)
+            for joint in arm.joints)
         self._viscous = tuple(j.viscous_friction_nm_s_per_rad for j in arm.joints)
         self._coulomb = tuple(j.coulomb_friction_nm for j in arm.joints)
 

@@ -39,8 +39,8 @@ from std_srvs.srv import SetBool, Trigger
 from arm_control.config import ArmConfig, ControllerConfig, JOINT_NAMES
 from arm_control.control.arm_controller import ArmController, SensorReading
 from arm_control.control.state_machine import ArmState
-from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, status, \
-    STATE_STREAM
+from arm_control.nodes.common import (COMMANDS, declare_parameters, LATCHED, run,
+                                      STATE_STREAM, status)
 from arm_control.planning.planner import waypoints_from_poses
 
 FRAME = 'arm_base'

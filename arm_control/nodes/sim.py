@@ -18,8 +18,8 @@ from std_srvs.srv import Trigger
 
 from arm_control.config import ArmConfig, JOINT_NAMES, SimConfig
 from arm_control.model.plant import ArmPlant
-from arm_control.nodes.common import (COMMANDS, declare_parameters, finite, run, status,
-                                      STATE_STREAM)
+from arm_control.nodes.common import (COMMANDS, declare_parameters, finite, run,
+                                      STATE_STREAM, status)
 
 # After a stall (a paused process, a loaded machine) the physics catches up at most this far.
 MAX_CATCH_UP_S = 0.1

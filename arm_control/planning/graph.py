@@ -170,8 +170,8 @@ class ConfigurationGrid:
         keep = self.free[i, j]
         return (i[keep] * self.elbow.count + j[keep]).astype(int)
 
-    def connections(self, q, toward: bool, radius_cells=(1, 2, 4)) -> tuple[np.ndarray,
-                                                                           np.ndarray]:
+    def connections(self, q, toward: bool,
+                    radius_cells=(1, 2, 4)) -> tuple[np.ndarray, np.ndarray]:
         """Free nodes joined to q by a checked straight segment, and the cost of each.
 
         ``toward``: check the segment node → q (q is a goal) rather than q → node.
@@ -229,8 +229,8 @@ class ConfigurationGrid:
     def check_all_edges(self) -> int:
         """Check every edge between free neighbours now (eager, as a slow start-up would);
         returns how many are blocked."""
-        slots = np.flatnonzero(self.indices != np.repeat(np.arange(self.node_count),
-                                                        len(DIRECTIONS)))
+        slots = np.flatnonzero(
+            self.indices != np.repeat(np.arange(self.node_count), len(DIRECTIONS)))
         slots = slots[~self.checked_free[slots]]
         a = slots // len(DIRECTIONS)
         b = self.indices[slots].astype(int)
