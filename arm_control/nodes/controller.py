@@ -148,6 +148,7 @@ class ControllerNode(Node):
         self.joint_states_s = -math.inf
         self.encoders = None                # (positions, received at)
         self.bad_inputs = 0
+        self.bad_inputs_said = 0            # ... up to the last diagnostics
         self.timed_plans = deque()          # from the worker thread to the loop
         self.workers = ThreadPoolExecutor(max_workers=1, thread_name_prefix='timing')
         self.last_state = None
@@ -425,6 +426,10 @@ class ControllerNode(Node):
         if worst > 3 * self.period_s:
             level = max(level, DiagnosticStatus.WARN)
             message += f'; control loop stalled for {worst:.3f} s'
+        malformed, self.bad_inputs_said = self.bad_inputs - self.bad_inputs_said, self.bad_inputs
+        if malformed:
+            level = max(level, DiagnosticStatus.WARN)
+            message += f'; {malformed} malformed messages ignored (the log says which)'
         encoders_age = now - self.encoders[1] if self.encoders is not None else math.inf
         values = dict(self.core.diagnostics(now))
         values.update({
