@@ -39,6 +39,7 @@ class SimNode(Node):
             self.plant.rest()
         self.last_command_time = -math.inf
         self.commands_rejected = 0
+        self.commands_rejected_reported = 0
         self.timed_out = True
 
         self.joint_states_pub = self.create_publisher(JointState, 'joint_states', STATE_STREAM)
@@ -132,6 +133,10 @@ class SimNode(Node):
         mean = sum(periods) / len(periods) if periods else math.nan
         level = DiagnosticStatus.OK
         message = 'running'
+        rejected_now = self.commands_rejected - self.commands_rejected_reported
+        self.commands_rejected_reported = self.commands_rejected
+        if rejected_now:
+            level, message = DiagnosticStatus.WARN, f'{rejected_now} malformed voltage commands'
         if self.timed_out:
             level, message = DiagnosticStatus.WARN, 'no voltage commands: applying 0 V'
         if worst > 3 * self.period_s:
