@@ -188,7 +188,12 @@ def test_controller_restart_mid_motion_comes_back_holding(rig):
           f' deg; states {states}')
     assert set(states) <= {'no_sensors', 'waiting'}, 'it resumed an old motion'
     assert not queue.poses
-    assert np.max(np.abs(held_q - taken_q)) < 10.0 * DEG, 'it did not hold where it found it'
+    # It holds where it found the arm -- or, when it found the arm fallen into the floor,
+    # lifts it back towards free space: never deeper, never far.
+    moved_rad = np.max(np.abs(held_q - taken_q))
+    lifted = FORBIDDEN.lowest_point_m(held_q) > FORBIDDEN.lowest_point_m(taken_q)
+    assert moved_rad < 10.0 * DEG or (lifted and moved_rad < 20.0 * DEG), \
+        'it neither held where it found the arm nor lifted it out of the floor'
     # With no controller for seconds the arm may have fallen into forbidden space (to its
     # hard stop): once held it is never pushed deeper, and the next goal takes it out.
     held_s = time.monotonic()
