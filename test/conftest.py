@@ -47,3 +47,20 @@ def launch(domain, tmp_path):
     yield start
     for process in started:
         process.stop()
+
+
+@pytest.fixture(scope='module')
+def rig(request, tmp_path_factory):
+    """sim, planner and controller as processes, shared by one module's tests, and a probe."""
+    from arm_rig import ArmRig
+    from ros_harness import Probe, ros_domain
+    with ros_domain() as domain:
+        probe = Probe(domain)
+        rig = ArmRig(domain, probe, tmp_path_factory.mktemp(request.module.__name__))
+        try:
+            rig.start_all()
+            rig.ready()
+            yield rig
+        finally:
+            rig.close()
+            probe.close()

@@ -73,7 +73,8 @@ class NodeProcess:
                                         stderr=subprocess.STDOUT, start_new_session=True)
 
     def output(self) -> str:
-        self.log.flush()
+        if not self.log.closed:
+            self.log.flush()
         return self.log_path.read_text()
 
     def alive(self) -> bool:

@@ -21,7 +21,6 @@ import time
 from arm_rig import ArmRig, DEG
 from nav_msgs.srv import GetPlan
 import numpy as np
-import pytest
 from std_srvs.srv import Trigger
 
 from arm_control import config
@@ -33,21 +32,6 @@ TIMEOUT_S = CONTROLLER.joint_state_timeout_s
 # Probe-side slack on top of a bound the controller keeps: DDS delivery both ways, and the
 # probe's own scheduling on a shared machine.
 PROBE_SLACK_S = 0.1
-
-
-@pytest.fixture(scope='module')
-def rig(tmp_path_factory):
-    from ros_harness import Probe, ros_domain
-    with ros_domain() as domain:
-        probe = Probe(domain)
-        rig = ArmRig(domain, probe, tmp_path_factory.mktemp('faults'))
-        try:
-            rig.start_all()
-            rig.ready()
-            yield rig
-        finally:
-            rig.close()
-            probe.close()
 
 
 def assert_never_forbidden(messages):

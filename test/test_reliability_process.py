@@ -12,9 +12,8 @@ One launch for the module: the tests run in order on the same three processes.
 import math
 import time
 
-from arm_rig import ArmRig, BAD_GOALS, DEG, periods, start_flood
+from arm_rig import BAD_GOALS, DEG, periods, start_flood
 import numpy as np
-import pytest
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -29,21 +28,6 @@ KINEMATICS = TwoLinkKinematics(ARM.shoulder.length_m, ARM.elbow.length_m)
 FORBIDDEN = ForbiddenSpace(ARM)
 FLOOD_RATE_HZ = 1000.0
 FLOOD_S = 10.0
-
-
-@pytest.fixture(scope='module')
-def rig(tmp_path_factory):
-    from ros_harness import Probe, ros_domain
-    with ros_domain() as domain:
-        probe = Probe(domain)
-        rig = ArmRig(domain, probe, tmp_path_factory.mktemp('reliability'))
-        try:
-            rig.start_all()
-            rig.ready()
-            yield rig
-        finally:
-            rig.close()
-            probe.close()
 
 
 def tool_xy(messages) -> np.ndarray:

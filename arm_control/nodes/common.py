@@ -109,6 +109,10 @@ def run(node_class, args=None) -> int:
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if rclpy.ok():
+            raise
+        # Ctrl-C shut the context down beneath a callback still running: that is shutdown.
     finally:
         if node is not None:
             shutdown = getattr(node, 'on_shutdown', None)
