@@ -200,6 +200,7 @@ class WorldConfig:
 
     regions: tuple[Rectangle, ...]
     clearance_m: float
+    clearance_rad: float
     min_elbow_fold_rad: float
 
 
@@ -251,6 +252,7 @@ class ArmConfig:
         world = WorldConfig(
             regions=tuple(regions),
             clearance_m=read.nonnegative('world.clearance_m'),
+            clearance_rad=read.number('world.clearance_rad', low=0.0, high=0.2),
             min_elbow_fold_rad=read.number('world.min_elbow_fold_rad', low=0.0, high=math.pi),
         )
         presets = tuple((name, *read.numbers(f'presets.{name}', 2))
@@ -326,6 +328,7 @@ class ControllerConfig:
     clamp_unreachable_goals: bool
     tracking_error_limit_rad: float
     tracking_error_time_s: float
+    estop_holds_arm: bool
     joint_state_timeout_s: float
     planner_timeout_s: float
     feedback_voltage_reserve: float
@@ -364,6 +367,7 @@ class ControllerConfig:
             clamp_unreachable_goals=read.boolean('clamp_unreachable_goals'),
             tracking_error_limit_rad=read.positive('tracking_error_limit_rad'),
             tracking_error_time_s=read.nonnegative('tracking_error_time_s'),
+            estop_holds_arm=read.boolean('estop_holds_arm'),
             joint_state_timeout_s=read.positive('joint_state_timeout_s'),
             planner_timeout_s=read.positive('planner_timeout_s'),
             feedback_voltage_reserve=read.nonnegative('feedback_voltage_reserve'),

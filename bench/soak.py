@@ -11,11 +11,11 @@ Reported at the end:
 
 - goals: sent, reached, rejected or failed with their reasons (numbers blanked), dropped
   (cleared by an e-stop or the controller's queue full);
-- contact with forbidden space on ``/sim/ground_truth``, split by what the controller was
-  doing when the arm entered it: while commanding (must be zero); while at 0 V (e-stopped,
-  no joint states: nothing holds a 45 kg arm up then; it falls as a real one would), or
-  within a second after (the controller has it again, still braking that fall) -- reported,
-  not excused;
+- contact with forbidden space on ``/sim/ground_truth``, split by what the motors were told
+  when the arm entered it (the last ``voltage_command`` heard): while commanding (must be
+  zero); while at 0 V (no joint states, or an e-stop cut to 0 V: nothing holds a 45 kg arm
+  up then; it falls as a real one would), or within a second after (the controller has it
+  again, still braking that fall) -- reported, not excused;
 - memory (RSS) of each node, minute by minute;
 - control-loop period: ``voltage_command`` as the probe hears it (median, p99, worst), and
   the controller's own worst period per second from its diagnostics.
@@ -50,13 +50,13 @@ from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
 from arm_control.planning.cspace import ForbiddenSpace  # noqa: E402
 
 ARM, CONTROLLER = config.load('controller')
+_, SIM = config.load('sim')
 KINEMATICS = TwoLinkKinematics(ARM.shoulder.length_m, ARM.elbow.length_m)
 FORBIDDEN = ForbiddenSpace(ARM)
 VALIDATOR = GoalValidator(ARM)
 # Contact that begins this soon after a 0 V period is that fall carrying on (the controller
 # has the arm again, but it is still falling).
 FALL_CARRIES_ON_S = 1.0
-ZERO_VOLT_STATES = {'estopped', 'no_sensors', 'disabled'}
 # What happens each turn, with its weight.
 ACTIONS = {'good goal': 50, 'preset goal': 10, 'bad goal': 12, 'sim pause': 8,
            'planner pause': 5, 'planner restart': 4, 'estop': 5}
@@ -153,29 +153,40 @@ class Soak:
 
 
 def contact_runs(rig: ArmRig):
-    """Runs of true samples in forbidden space: (start time, samples, deepest m, the
-    controller's state when it began -- or 'after <0 V state>' when it began within
-    FALL_CARRIES_ON_S of one)."""
+    """Runs of true samples in forbidden space: (start time, samples, deepest m, what the
+    motors were told when it began: 'commanding (<state>)', 'at 0 V (<state>)' -- the last
+    command heard was 0 V, or none came for the sim's ``command_timeout_s`` -- or 'after
+    0 V' when a 0 V period ended within FALL_CARRIES_ON_S before it)."""
     times = np.array([t for t, _ in rig.truth])
     q = np.array([m.position for _, m in rig.truth])
     free = np.asarray(FORBIDDEN.is_free(q))
     lowest = np.asarray(FORBIDDEN.lowest_point_m(q))
     state_times = [t for t, _ in rig.states]
-    zero_volt_ends = [(t1, m0.data) for (_, m0), (t1, m1) in zip(rig.states, rig.states[1:])
-                      if m0.data in ZERO_VOLT_STATES and m1.data not in ZERO_VOLT_STATES]
+    command_times = np.array([t for t, _ in rig.voltages])
+    zero = np.array([not any(m.data) for _, m in rig.voltages])
+    zero_times = command_times[zero]
+
+    def at_zero_volts(t):
+        index = np.searchsorted(command_times, t, side='right') - 1
+        return index < 0 or zero[index] or t - command_times[index] > SIM.command_timeout_s
+
     runs, start = [], None
     for index, ok in enumerate(free):
         if not ok and start is None:
             start = index
         if (ok or index == len(free) - 1) and start is not None:
             end = index if ok else index + 1
-            where = np.searchsorted(state_times, times[start], side='right') - 1
+            began = times[start]
+            where = np.searchsorted(state_times, began, side='right') - 1
             state = rig.states[where][1].data if where >= 0 else ''
-            ends = [(t, zero) for t, zero in zero_volt_ends if t <= times[start]]
-            if state not in ZERO_VOLT_STATES and ends and \
-                    times[start] - ends[-1][0] <= FALL_CARRIES_ON_S:
-                state = f'after {ends[-1][1]}'
-            runs.append((times[start], end - start, float(np.min(lowest[start:end])), state))
+            earlier = zero_times[zero_times <= began]
+            if at_zero_volts(began):
+                label = f'at 0 V ({state})'
+            elif len(earlier) and began - earlier[-1] <= FALL_CARRIES_ON_S:
+                label = 'after 0 V'
+            else:
+                label = f'commanding ({state})'
+            runs.append((began, end - start, float(np.min(lowest[start:end])), label))
             start = None
     return runs
 
@@ -205,24 +216,24 @@ def report(soak: Soak, rig: ArmRig, minutes: float) -> None:
         print(f'| &nbsp;&nbsp;{reason} | {count} |')
 
     runs = contact_runs(rig)
-    at_zero = [r for r in runs if r[3] in ZERO_VOLT_STATES]
-    after_zero = [r for r in runs if r[3].startswith('after ')]
-    commanding = [r for r in runs if r not in at_zero and r not in after_zero]
+    at_zero = [r for r in runs if r[3].startswith('at 0 V')]
+    after_zero = [r for r in runs if r[3] == 'after 0 V']
+    commanding = [r for r in runs if r[3].startswith('commanding')]
     print('\n| contact with forbidden space (/sim/ground_truth) | entries | samples | '
           'deepest |\n|---|---|---|---|')
     for label, group in (('entered while the controller commanded (must be 0)', commanding),
-                         ('entered while at 0 V (e-stopped / no joint states: it falls)',
+                         ('entered while at 0 V (no joint states, power cut: it falls)',
                           at_zero),
                          (f'entered within {FALL_CARRIES_ON_S:g} s after 0 V (that fall, '
                           'still braking)', after_zero)):
         deepest = f'{-1000 * min(r[2] for r in group):.0f} mm' if group else '-'
         print(f'| {label} | {len(group)} | {sum(r[1] for r in group)} | {deepest} |')
     print(f'| true samples in all | | {len(rig.truth)} | |')
-    for began_at, samples, deepest_m, state in commanding + after_zero:
+    for began_at, samples, deepest_m, state in runs:
         before = [m.data for t, m in rig.events if t <= began_at][-3:]
         done = [(round(t - soak.began, 1), what) for t, what in soak.log
                 if began_at - 3.0 <= t <= began_at]
-        print(f'contact at {began_at - soak.began:.1f} s in state {state!r}: '
+        print(f'contact at {began_at - soak.began:.1f} s, {state}: '
               f'{samples} samples, {1000 * -deepest_m:.0f} mm deep; events before: {before}; '
               f'done in the 3 s before: {done}')
 

@@ -88,6 +88,12 @@ def rss_mb(pid: int) -> float:
     return math.nan
 
 
+def cpu_s(pid: int) -> float:
+    """CPU time a process has used, all its threads, user and system (/proc/<pid>/stat), s."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
 def periods(times) -> np.ndarray:
     return np.diff(np.asarray(times, float))
 
@@ -158,6 +164,9 @@ class ArmRig:
 
     def rss_mb(self, name: str) -> float:
         return rss_mb(self.processes[name].process.pid)
+
+    def cpu_s(self, name: str) -> float:
+        return cpu_s(self.processes[name].process.pid)
 
     def output(self, name: str) -> str:
         return self.processes[name].output()

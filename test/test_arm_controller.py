@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from arm_control import config
-from arm_control.control.arm_controller import ArmController, SensorReading
+from arm_control.control.arm_controller import ArmController, PlanRequest, SensorReading
 from arm_control.control.goals import StraightLinePlanner
 from arm_control.control.state_machine import ArmState, TRANSITIONS, Trigger
 from arm_control.control.trajectory import time_optimal_trajectory, TrajectoryLimits
@@ -328,6 +328,39 @@ def test_cancel_brakes_along_the_path_and_holds(arm, controller_config, planner)
     assert rig.lowest_m == 0.0
 
 
+@pytest.mark.parametrize('start_xy, goal_xy', [((0.057, 0.549), (-1.666, 0.205)),
+                                               ((0.3, 0.2), (0.25, 0.45)),
+                                               ((-0.4, 0.3), (0.25, 0.45))])
+def test_timed_moves_keep_the_clearance_from_forbidden_space(arm, controller_config, start_xy,
+                                                             goal_xy):
+    """Moves whose fastest shape, timed without the margin, grazes the floor: with it, the
+    whole timed motion keeps ``world.clearance_rad`` from forbidden space."""
+    margin = arm.world.clearance_rad
+    padded = ForbiddenSpace(arm, margin)
+    bare_arm = dataclasses.replace(arm, world=dataclasses.replace(arm.world, clearance_rad=0.0))
+    planner_config = config.load('planner')[1]
+    kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+
+    def clear_throughout(world_arm):
+        core = ArmController(world_arm, controller_config, Planner(world_arm, planner_config))
+        goal = core.validator.check(*goal_xy).goal
+        results = []
+        for start in kinematics.inverse(*start_xy):
+            if not padded.is_free(start):
+                continue
+            request = PlanRequest(1, goal, tuple(start), (0.0, 0.0), None, 0.0)
+            timed = core.plan_directly(request)
+            assert timed.ok, timed.reason
+            trajectory = timed.trajectory
+            times = np.linspace(0.0, trajectory.duration_s, 1000)
+            results.append(bool(np.all(padded.is_free(
+                np.array([trajectory.sample(t)[0] for t in times])))))
+        return results
+
+    assert all(clear_throughout(arm))
+    assert not all(clear_throughout(bare_arm))
+
+
 # --- safety ------------------------------------------------------------------------------
 
 def reading_at(q, velocity=(0.0, 0.0)):
@@ -422,19 +455,65 @@ def test_estop_when_a_joint_is_past_its_limit(arm, controller_config, joint, ang
     assert (arm.shoulder, arm.elbow)[joint].name in core.last_error
 
 
-def test_estop_service_and_reset(arm, controller_config, planner):
-    rig = Rig(arm, controller_config, planner)
+def estopped_mid_move(arm, controller_config, planner, **changes):
+    """A rig e-stopped by service 0.4 s into a fast move to back_score."""
+    config = dataclasses.replace(controller_config, **changes)
+    rig = Rig(arm, config, planner, seed=7)
     rig.core.submit_preset(rig.now, 'back_score')
-    rig.run(0.3)
+    rig.core.submit_preset(rig.now, 'stow', preempt=False)
+    rig.run(0.4)
+    assert np.max(np.abs(rig.plant.state[2:])) > 1.0            # moving fast
     ok, message = rig.core.estop(rig.now)
-    assert ok and 'E-STOP' in message
-    assert list(rig.step()) == [0.0, 0.0]
-    assert rig.core.pending_goals() == []
+    assert ok and message.startswith('E-STOP: e-stop requested')
+    assert rig.core.state == ArmState.ESTOPPED and rig.core.pending_goals() == []
+    return rig, message
+
+
+def test_an_estop_by_service_brakes_to_rest_and_holds_the_arm_there(arm, controller_config,
+                                                                    planner):
+    rig, message = estopped_mid_move(arm, controller_config, planner)
+    assert 'holding' in message
     assert not rig.core.submit_preset(rig.now, 'stow')[0]
+    rig.run(1.0)
+    stopped = rig.true_q
+    rig.run(2.0)
+    assert np.max(np.abs(rig.true_q - stopped)) < 0.3 * DEG     # held up against gravity
+    assert rig.core.state == ArmState.ESTOPPED and rig.lowest_m == 0.0
     ok, message = rig.core.reset(rig.now)
     assert ok and 'reset from estopped' in message
     assert rig.core.state == ArmState.WAITING
     assert rig.core.reset(rig.now) == (False, "nothing to reset in state 'waiting'")
+    assert rig.core.submit_preset(rig.now, 'stow')[0]
+    assert rig.run(6.0, lambda: rig.core.counts['reached'] == 1)
+
+
+@pytest.mark.parametrize('how', ['estop_holds_arm false', 'e-stop again', 'sensors lost'])
+def test_an_estop_cuts_the_power_when_asked_to_and_the_arm_falls(arm, controller_config,
+                                                                 planner, how):
+    """0 V: at once with ``estop_holds_arm`` false, on a second e-stop, or when the joint
+    states stop while the arm is held. Nothing then holds it: it falls."""
+    holds = how != 'estop_holds_arm false'
+    rig, message = estopped_mid_move(arm, controller_config, planner, estop_holds_arm=holds)
+    if holds:
+        rig.run(1.0)
+        if how == 'e-stop again':
+            ok, message = rig.core.estop(rig.now)
+        else:
+            rig.sensors_on = False
+            lost_at = rig.now
+            rig.run(1.0, lambda: not np.any(rig.voltages[-1]))
+            assert rig.now - lost_at <= controller_config.joint_state_timeout_s + \
+                2 * rig.period_s
+            message = rig.core.last_error
+    assert '0 V until reset' in message or 'while holding' in message
+    rig.step()
+    cut = rig.true_q
+    rig.run(1.0)
+    assert all(list(v) == [0.0, 0.0] for v in rig.voltages[-50:])
+    assert np.max(np.abs(rig.true_q - cut)) > 5.0 * DEG
+    assert rig.core.state == ArmState.ESTOPPED
+    rig.sensors_on = True
+    assert rig.core.estop(rig.now) == (True, 'already e-stopped: 0 V until reset')
 
 
 def test_stops_commanding_when_joint_states_stop_and_recovers(arm, controller_config, planner):
@@ -456,6 +535,25 @@ def test_stops_commanding_when_joint_states_stop_and_recovers(arm, controller_co
     # The interrupted goal and the queue come back: both are reached.
     assert rig.run(10.0, lambda: rig.core.counts['reached'] == 2)
     assert rig.core.current_goal is None and not rig.core.queue
+
+
+def test_found_on_the_floor_line_the_arm_is_lifted_clear_before_it_is_held(
+        arm, controller_config, planner):
+    """The forearm's tip 1 cm above the floor (as after sagging at 0 V): the hold taken when
+    the sensors arrive first lifts it clear by the margin, then holds it there."""
+    shoulder = 0.3
+    heading = math.asin((0.01 - math.sin(shoulder)) / arm.elbow.length_m)
+    rig = Rig(arm, controller_config, planner, start=(shoulder, heading - shoulder))
+    margin = arm.world.clearance_rad
+    assert not rig.forbidden.clear_by(rig.true_q, margin)
+    rig.run(1.0)
+    lifted = rig.true_q
+    assert any('lifting it clear' in e.message for e in rig.core.events)
+    assert rig.forbidden.clear_by(lifted, 0.8 * margin)
+    assert np.max(np.abs(lifted - (shoulder, heading - shoulder))) < 3.0 * margin
+    rig.run(1.0)
+    assert np.max(np.abs(rig.true_q - lifted)) < 0.3 * DEG
+    assert rig.core.state == ArmState.WAITING and rig.lowest_m == 0.0
 
 
 def test_disable_sends_zero_and_enable_holds_where_the_arm_is(arm, controller_config, planner):

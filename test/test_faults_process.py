@@ -8,8 +8,9 @@
   finishes the queue;
 - the controller crashes mid-motion (SIGKILL) and is started again: it comes back waiting,
   holding the arm where it finds it, with no memory of the old motion;
-- e-stop by service, and by the tracking-error rule (a sim whose forearm is far heavier than
-  the controller's model: the arm cannot follow).
+- e-stop by service (the arm brakes to rest and is held; again: 0 V), and by the
+  tracking-error rule (a sim whose forearm is far heavier than the controller's model: the
+  arm cannot follow, and the power is cut).
 
 Where the arm went is read from the sim's true state, which the controller never sees.
 The first five share one launch of sim, planner and controller, in order.
@@ -193,22 +194,32 @@ def test_controller_restart_mid_motion_comes_back_holding(rig):
 
 
 def test_estop_by_service(rig):
+    """Mid-motion: the arm brakes to rest and is held there, never in forbidden space; the
+    queue is cleared and goals are refused until reset. A second e-stop cuts the power."""
     began = time.monotonic()
     rig.send(-1.0, 1.0)
     rig.send(0.9, 1.5)
     assert rig.wait_state('tracking', 10.0)
     response = rig.call(Trigger, '/controller/estop')
     stopped = time.monotonic()
-    assert response.success and 'E-STOP' in response.message
+    assert response.success and 'E-STOP' in response.message and 'holding' in response.message
     assert rig.wait_state('estopped', 2.0)
-    rig.spin_for(0.5)
-    after = [m for t, m in rig.voltages if t > stopped]
-    assert after and all(zero(m) for m in after)
     assert not rig.queue.last().poses                      # the queue is cleared
     rig.send(1.1, 0.9)
     assert rig.wait_said('e-stopped', 3.0, stopped)
     assert rig.spin_until(lambda: any(d['level'] == 2 and 'E-STOP' in d['message']
                                       for d in rig.controller_diagnostics(stopped)), 3.0)
+    assert rig.wait_still(timeout_s=5.0)                   # braked to rest ...
+    rested = rig.true_q()
+    rig.spin_for(1.0)
+    assert np.max(np.abs(rig.true_q() - rested)) < 1.0 * DEG     # ... and held up there
+    assert_never_forbidden(rig.truth.messages(stopped))
+
+    assert rig.call(Trigger, '/controller/estop').message.endswith('0 V until reset')
+    cut = time.monotonic()
+    rig.spin_for(0.5)
+    after = [m for t, m in rig.voltages if t > cut + PROBE_SLACK_S]
+    assert after and all(zero(m) for m in after)
     assert rig.call(Trigger, '/controller/reset').success
     assert rig.wait_state('waiting', 3.0)
     mark = time.monotonic()

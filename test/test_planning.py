@@ -510,3 +510,46 @@ def test_a_search_leaves_the_graph_layout_alone(frc_forbidden):
         assert np.max(np.abs(step)) == pytest.approx(0.1)
         assert distance[node] - distance[predecessor[node]] == pytest.approx(
             np.abs(step).sum(), rel=2e-5)
+
+
+# Clearance: where a hold is safe from sensor noise
+
+MARGIN_RAD = math.radians(1.0)
+
+
+def test_an_arm_lying_on_the_floor_line_is_free_but_not_clear(arm):
+    forbidden = ForbiddenSpace(arm)
+    on_the_floor = (0.0, 0.5)                   # upper arm along y = 0: touching is allowed
+    assert forbidden.is_free(on_the_floor)
+    assert not forbidden.clear_by(on_the_floor, MARGIN_RAD)
+    assert forbidden.clear_by((0.5, 0.5), MARGIN_RAD)
+    np.testing.assert_array_equal(
+        forbidden.clear_by(np.array([on_the_floor, (0.5, 0.5)]), MARGIN_RAD), [False, True])
+
+
+@pytest.mark.parametrize('start, distance_rad', [((0.0, 0.5), MARGIN_RAD),
+                                                 ((-0.1, 0.5), 0.1 + MARGIN_RAD)])
+def test_the_nearest_clear_configuration_lifts_the_upper_arm(arm, start, distance_rad):
+    """Lying on, or 5.7 deg into, the floor with the forearm raised: the nearest clear
+    configuration raises the shoulder just past the margin, straight up out of it."""
+    forbidden = ForbiddenSpace(arm)
+    target = forbidden.nearest_clear(start, MARGIN_RAD, reach_rad=0.35)
+    assert target is not None and forbidden.clear_by(target, MARGIN_RAD)
+    assert distance_rad - 1e-9 <= np.linalg.norm(target - start) \
+        <= distance_rad + MARGIN_RAD / 2
+    assert target[0] > start[0]
+    samples = start + np.linspace(0.0, 1.0, 200)[:, None] * (target - start)
+    free = forbidden.is_free(samples)
+    assert np.all(free[np.argmax(free):])           # once out, it stays out
+
+
+def test_no_clear_configuration_within_reach_is_none(arm):
+    assert ForbiddenSpace(arm).nearest_clear((-0.349, 0.5), MARGIN_RAD, reach_rad=0.2) is None
+
+
+def test_a_goal_just_above_the_floor_is_still_planned(seed_planner):
+    """1 cm above the floor, inside the clearance a hold keeps: planned all the same."""
+    plan = seed_planner.plan((1.5, 1.0), (1.5, 0.01))
+    assert_free_path(seed_planner, plan)
+    assert seed_planner.kinematics.forward(plan.waypoints_rad[-1]) == pytest.approx(
+        (1.5, 0.01), abs=1e-9)

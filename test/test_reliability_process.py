@@ -133,10 +133,24 @@ def test_malformed_sensor_and_voltage_messages_are_ignored(rig):
     assert rig.processes['sim'].alive() and rig.processes['controller'].alive()
 
 
+def test_at_rest_each_node_uses_a_small_share_of_a_core(rig):
+    """Holding the arm costs the controller about 15 % of a core and the sim less; a
+    busy-waiting thread (OpenBLAS's, once) takes a whole core of the two the arm may have."""
+    assert rig.wait_still()
+    names = ('sim', 'planner', 'controller')
+    before, began = [rig.cpu_s(name) for name in names], time.monotonic()
+    rig.spin_for(5.0)
+    seconds = time.monotonic() - began
+    share = {name: (rig.cpu_s(name) - used) / seconds for name, used in zip(names, before)}
+    print('share of a core at rest: ' + ', '.join(f'{n} {s:.0%}' for n, s in share.items()))
+    assert all(s < 0.5 for s in share.values()), share
+
+
 def test_flood_of_goals_bounded_memory_and_loop_rate(rig):
     """1,000 goals a second for 10 s, of every kind, from a process of their own."""
     assert rig.call(Trigger, '/controller/cancel').success
     assert rig.wait_state('waiting', 5.0)
+    assert rig.spin_until(lambda: rig.controller_diagnostics(), 5.0)
     log_lines_before = len(rig.output('controller').splitlines())
     baseline_mb = rig.rss_mb('controller')
     first = rig.controller_diagnostics()[-1]

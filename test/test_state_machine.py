@@ -6,7 +6,7 @@ That the controller really takes each row is tested in ``test_arm_controller.py`
 import pytest
 
 from arm_control.control.state_machine import (ArmState, COMMANDING, InvalidTransition,
-                                               StateMachine, TRANSITIONS, Trigger, ZERO_VOLTS)
+                                               StateMachine, STOPPED, TRANSITIONS, Trigger)
 
 ALL_PAIRS = [(state, trigger) for state in ArmState for trigger in Trigger]
 
@@ -31,8 +31,8 @@ def test_any_other_trigger_is_refused_and_changes_nothing(state, trigger):
 
 
 def test_states_are_either_commanding_or_zero_volts():
-    assert COMMANDING | ZERO_VOLTS == set(ArmState)
-    assert not COMMANDING & ZERO_VOLTS
+    assert COMMANDING | STOPPED == set(ArmState)
+    assert not COMMANDING & STOPPED
 
 
 def test_an_estop_is_left_only_by_reset():
@@ -51,10 +51,10 @@ def test_every_commanding_state_can_be_estopped_disabled_and_lose_its_sensors():
 def test_zero_volt_states_reach_a_commanding_state_only_by_an_explicit_trigger():
     """Out of 0 V only through: sensors returning, reset, enable."""
     way_out = {trigger for (state, trigger), target in TRANSITIONS.items()
-               if state in ZERO_VOLTS and target in COMMANDING}
+               if state in STOPPED and target in COMMANDING}
     assert way_out == {Trigger.SENSORS_BACK, Trigger.RESET, Trigger.ENABLE}
     for (state, trigger), target in TRANSITIONS.items():
-        if state in ZERO_VOLTS and target in COMMANDING:
+        if state in STOPPED and target in COMMANDING:
             assert target == ArmState.WAITING            # ... and then only to hold
 
 

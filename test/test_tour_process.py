@@ -11,7 +11,7 @@ def test_tour_reaches_its_goals_and_ends(launch):
     output = tour.output()
     assert 'tour finished' in output
     live = output.split('tour finished')[0]          # the per-goal lines, not the summary
-    reached = re.findall(r'(\w+) \([^)]*\) m: reached in ([\d.]+) s, final error ([\d.]+) mm',
+    reached = re.findall(r'(\w+) \([^)]*\) m: reached in ([\d.]+) s, held ([\d.]+) mm from',
                          live)
     assert [name for name, _, _ in reached] == ['mid_score', 'back_score', 'stow'], output
     for _, seconds, error_mm in reached:

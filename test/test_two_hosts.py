@@ -183,7 +183,17 @@ def check(goal=(1.1, 0.9)) -> dict:
     message.header.frame_id = 'arm_base'
     message.point.x, message.point.y = goal
     sent_at = len(truth)
-    goals.publish(message)
+    # The checker may see the controller's subscription before the controller has matched
+    # this publisher over the wire; a goal sent in that gap is lost, so send it until the
+    # controller says it has it.
+    for _ in range(5):
+        heard = len(events)
+        goals.publish(message)
+        answer_by = min(time.monotonic() + 2.0, deadline)
+        while time.monotonic() < answer_by and len(events) == heard:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        if len(events) > heard:
+            break
     reached = spin_until(lambda: any(e.startswith('reached') for e in events))
     end = time.monotonic() + 0.5
     while time.monotonic() < end:

@@ -17,7 +17,9 @@ Each period the node (or a test, or a benchmark) calls ``step(now_s, reading)``;
    state; the trajectory is timed with ``feedback_voltage_reserve`` volts left for the PID
    where it brakes a joint (``driving_voltage_reserve`` where it drives one);
 4. enforces the e-stop rules: tracking error above ``tracking_error_limit_rad`` for
-   ``tracking_error_time_s``, or a joint past its limit -> 0 V until ``reset``.
+   ``tracking_error_time_s``, or a joint past its limit -> 0 V until ``reset`` (control has
+   failed: holding would lean on what failed). An e-stop by service brakes to rest along
+   the path and holds there (``estop_holds_arm``): with no brake, 0 V drops a 45 kg arm.
 
 Planning is asynchronous in the node: starting a goal emits a ``PlanRequest``
 (``take_plan_requests``); the answer comes back through ``on_plan`` -- or, split so the
@@ -33,7 +35,10 @@ trajectory takes over at that instant: position and velocity continue.
 A large jump of the sensors (the filter re-initialises farther from the setpoint than the
 tracking-error limit: the arm was moved, the sim restarted) makes the arm hold where it now
 is and plan an interrupted goal again from there; a start in forbidden space is left along
-the planner's first leg (timed without the free-space check it cannot pass).
+the planner's first leg (timed without the free-space check it cannot pass). Every hold
+taken where the arm happens to be (sensors back, reset, enable, moved) first lifts it
+``world.clearance_rad`` clear of forbidden space if it sagged nearer at 0 V; a plan that
+keeps that clearance is timed keeping it too.
 """
 
 from collections import deque
@@ -49,12 +54,14 @@ from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.estimator import ArmEstimator
 from arm_control.control.goals import CHECK_STEP_RAD, choose_branch, Goal, GoalValidator
 from arm_control.control.pid import ArmPid
-from arm_control.control.state_machine import ArmState, StateMachine, Trigger, ZERO_VOLTS
+from arm_control.control.state_machine import (ArmState, COMMANDING, StateMachine, STOPPED,
+                                               Trigger)
 from arm_control.control.trajectory import (estimated_duration_s, PeriodFeedforward,
                                             sure_acceleration_rad_s2, time_optimal_trajectory,
                                             TrajectoryError, TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.planning.cspace import ForbiddenSpace
 
 # A preempting goal's new trajectory starts this far ahead on the current one: the time
 # the planner and the timing need, so the switch happens on time. Doubled on each retry.
@@ -78,6 +85,9 @@ LEAP_MARGIN_RAD = 0.05
 DRIVER_DAMPING_M = 0.05
 # Driver mode stops this much short of forbidden space, on top of the braking distance.
 DRIVER_STOP_MARGIN_RAD = 0.03
+# A hold is lifted clear of forbidden space only from this near it: deeper in, the way out
+# is the planner's.
+LIFT_REACH_RAD = 0.35
 EVENT_HISTORY = 200
 
 
@@ -293,6 +303,7 @@ class ArmController:
         self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
         self.validator = GoalValidator(arm, config.clamp_unreachable_goals)
         self.forbidden = self.validator.forbidden
+        self.clear_space = ForbiddenSpace(arm, arm.world.clearance_rad)
         self.limits = TrajectoryLimits.from_config(arm, config)
         self.estimator = ArmEstimator(arm, config.process_noise_rad_s2)
         self.pid = ArmPid.from_config(config)
@@ -339,6 +350,7 @@ class ArmController:
         self.setpoint = (np.zeros(2), np.zeros(2), np.zeros(2))
         self.tracking_error_rad = np.zeros(2)
         self.over_limit_since_s: Optional[float] = None
+        self.estop_holding = False      # e-stopped, holding the arm (not at 0 V)
 
         # Driver mode: the setpoint over the current period, q̈ constant (decided at t0).
         self.driver_velocity_mps = np.zeros(2)
@@ -440,7 +452,7 @@ class ArmController:
     def cancel(self, now_s: float) -> tuple[bool, str]:
         """Clear the queue and the current goal; brake to rest along the path and hold."""
         dropped = len(self.queue) + (self.current_goal is not None)
-        if self.state not in ZERO_VOLTS:
+        if self.state in COMMANDING:
             self._brake(now_s)
         self._drop_goals()
         if self.machine.can(Trigger.CANCEL):
@@ -449,17 +461,29 @@ class ArmController:
         self._say(now_s, 'info', message)
         return True, message
 
-    def estop(self, now_s: float, reason: str = 'e-stop requested') -> tuple[bool, str]:
-        """0 V from now until ``reset``; the queue is cleared."""
+    def estop(self, now_s: float, reason: str = 'e-stop requested',
+              cut_power: bool = False) -> tuple[bool, str]:
+        """Stopped until ``reset``, the queue cleared: braked to rest along the path and held
+        there (``estop_holds_arm``, and the arm under control), else -- ``cut_power``, or
+        e-stopped again while held -- 0 V."""
+        hold = self.config.estop_holds_arm and not cut_power and self.state in COMMANDING
         if self.state == ArmState.ESTOPPED:
-            return True, 'already e-stopped'
-        self._drop_goals()
-        self._fire(Trigger.ESTOP)
-        self.counts['estops'] += 1
-        self.voltage = np.zeros(2)
-        self.pid.reset()
+            if not self.estop_holding:
+                return True, 'already e-stopped: 0 V until reset'
+        else:
+            if hold:
+                self._brake(now_s)
+            self._drop_goals()
+            self._fire(Trigger.ESTOP)
+            self.counts['estops'] += 1
+        self.estop_holding = hold
+        if not hold:
+            self.voltage = np.zeros(2)
+            self.pid.reset()
         self.last_error = f'E-STOP: {reason}'
-        message = f'E-STOP: {reason}; 0 V until reset'
+        action = ('braking to rest and holding there until reset (e-stop again: 0 V)' if hold
+                  else '0 V until reset')
+        message = f'E-STOP: {reason}; {action}'
         self._say(now_s, 'error', message)
         return True, message
 
@@ -469,6 +493,7 @@ class ArmController:
             return False, f"nothing to reset in state '{self.state}'"
         previous = self.state
         self._fire(Trigger.RESET)
+        self.estop_holding = False
         self._hold_at_estimate(now_s)
         self.last_error = ''
         message = f'reset from {previous}: holding at the current position'
@@ -537,12 +562,16 @@ class ArmController:
             out, rest = None, waypoints
         if len(rest) > 1 and not self.forbidden.path_is_free(rest, CHECK_STEP_RAD):
             return None, f'the plan to {request.goal.label} enters forbidden space: refused'
+        # A path that keeps the clearance is bent (when timing finds a faster shape) only
+        # where it keeps it still.
+        space = self.clear_space if self.clear_space.path_is_free(rest, CHECK_STEP_RAD) \
+            else self.forbidden
         if out is None:
-            return time_optimal_trajectory(rest, self.dynamics, self.forbidden, self.limits,
+            return time_optimal_trajectory(rest, self.dynamics, space, self.limits,
                                            start_velocity_rad_s=request.start_velocity_rad_s), ''
         first = time_optimal_trajectory(out, self.dynamics, _Anywhere(), self.limits,
                                         start_velocity_rad_s=request.start_velocity_rad_s)
-        second = time_optimal_trajectory(rest, self.dynamics, self.forbidden, self.limits)
+        second = time_optimal_trajectory(rest, self.dynamics, space, self.limits)
         return ChainedTrajectory([first, second]), ''
 
     def plan_directly(self, request: PlanRequest, planner=None) -> TimedPlan:
@@ -629,13 +658,13 @@ class ArmController:
             request = self.pending
             self._outbox = []
             self.on_timed_plan(now_s, self.plan_directly(request))
-        if self.state in ZERO_VOLTS:
+        if self.state in STOPPED and not self.estop_holding:
             self.voltage = np.zeros(2)
             self.tracking_error_rad = np.zeros(2)
             return self.voltage.copy()
         self.voltage = self._control(now_s, dt_s)
         self._check_tracking(now_s)
-        if self.state in ZERO_VOLTS:
+        if self.state in STOPPED and not self.estop_holding:
             self.voltage = np.zeros(2)
         return self.voltage.copy()
 
@@ -702,12 +731,15 @@ class ArmController:
             self.last_error = (f'no joint states for {age_s:.3f} s (limit '
                                f'{self.config.joint_state_timeout_s:g} s)')
             self._say(now_s, 'error', f'{self.last_error}: sending 0 V until they return')
+        if not fresh and self.estop_holding:
+            self.estop(now_s, f'no joint states for {age_s:.3f} s while holding', cut_power=True)
         if fresh and self.state == ArmState.NO_SENSORS:
             self._fire(Trigger.SENSORS_BACK)
-            self._hold_at_estimate(now_s)
             self._say(now_s, 'info', 'joint states arriving: holding at the current position')
-        if self.state in ZERO_VOLTS:
+            self._hold_at_estimate(now_s)
+        if self.state in STOPPED:
             self.jumped = False
+            self.timeline.prune(now_s)
             return
         if self.last_potentiometer is not None and self._past_a_limit(now_s):
             return
@@ -776,7 +808,8 @@ class ArmController:
             if not (joint.min_angle_rad - margin <= pot[index] <= joint.max_angle_rad + margin):
                 self.estop(now_s, f'{joint.name} at {math.degrees(pot[index]):.1f} deg is past '
                                   f'its limits [{math.degrees(joint.min_angle_rad):.1f}, '
-                                  f'{math.degrees(joint.max_angle_rad):.1f}] deg')
+                                  f'{math.degrees(joint.max_angle_rad):.1f}] deg',
+                           cut_power=True)
                 return True
         return False
 
@@ -811,7 +844,7 @@ class ArmController:
         if now_s - self.over_limit_since_s >= self.config.tracking_error_time_s:
             self.estop(now_s, f'tracking error {math.degrees(worst):.1f} deg above '
                               f'{math.degrees(self.config.tracking_error_limit_rad):.1f} deg '
-                              f'for {self.config.tracking_error_time_s:g} s')
+                              f'for {self.config.tracking_error_time_s:g} s', cut_power=True)
 
     # ------------------------------------------------------------------ driver mode
 
@@ -946,8 +979,34 @@ class ArmController:
         self.pending, self._outbox = None, []
 
     def _hold_at_estimate(self, now_s: float) -> None:
-        q = self.estimator.state[:2] if self.estimate_time_s is not None else np.zeros(2)
-        self.timeline.schedule(Motion(HoldTrajectory(q), now_s))
+        """Hold where the arm is; nearer forbidden space than ``world.clearance_rad`` (it
+        sagged there at 0 V), lift it clear first, by the shortest straight move."""
+        q = self.estimator.state[:2].copy() if self.estimate_time_s is not None else np.zeros(2)
+        motion = Motion(HoldTrajectory(q), now_s)
+        margin = self.arm.world.clearance_rad
+        if self.estimate_time_s is not None and margin > 0.0 and \
+                not self.forbidden.clear_by(q, margin):
+            target = self.forbidden.nearest_clear(q, margin, LIFT_REACH_RAD)
+            lift = None
+            if target is not None:
+                try:
+                    lift = time_optimal_trajectory(np.array([q, target]), self.dynamics,
+                                                   _Anywhere(), self.limits)
+                except TrajectoryError:
+                    pass
+            if lift is None:
+                self._say(now_s, 'warning', f'the arm is in or within '
+                                            f'{math.degrees(margin):.1f} deg of forbidden '
+                                            'space and no short move lifts it clear: holding '
+                                            'there; the next goal leaves along its plan')
+            else:
+                motion = Motion(lift, now_s)
+                step = np.degrees(target - q)
+                self._say(now_s, 'warning', f'the arm is within {math.degrees(margin):.1f} deg '
+                                            f'of forbidden space: lifting it clear by '
+                                            f'({step[0]:+.1f}, {step[1]:+.1f}) deg, holding '
+                                            'there')
+        self.timeline.schedule(motion)
         self.goal_q = None
         self.pid.reset()
         self.over_limit_since_s = None

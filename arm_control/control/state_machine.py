@@ -9,7 +9,10 @@ arm never reaches a state by an unplanned path. What the arm does in each state:
     tracking    following a trajectory to the goal
     holding     at the goal (finished): holds it, dwells, then takes the next goal
     error       the last goal failed (rejected, no plan): holds where it is
-    estopped    0 V until reset
+    estopped    stopped until reset: an e-stop by service brakes to rest and holds there
+                (``estop_holds_arm``: at 0 V a 45 kg arm with no brake falls); one that
+                control itself failed (tracking error, a joint past its limit), a second
+                e-stop, or losing the sensors meanwhile: 0 V
     disabled    0 V until enabled
     driver      end-effector velocity commands from a driver
 """
@@ -56,8 +59,8 @@ class Trigger(str, Enum):
 S, T = ArmState, Trigger
 # The states in which the controller commands the motors to follow a setpoint.
 COMMANDING = frozenset({S.WAITING, S.PLANNING, S.TRACKING, S.HOLDING, S.ERROR, S.DRIVER})
-# The states that send 0 V.
-ZERO_VOLTS = frozenset({S.NO_SENSORS, S.ESTOPPED, S.DISABLED})
+# The states that take no goal and follow no plan: 0 V, but for an e-stop holding the arm.
+STOPPED = frozenset({S.NO_SENSORS, S.ESTOPPED, S.DISABLED})
 
 TRANSITIONS: dict[tuple[ArmState, Trigger], ArmState] = {
     (S.NO_SENSORS, T.SENSORS_BACK): S.WAITING,

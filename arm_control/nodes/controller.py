@@ -150,6 +150,7 @@ class ControllerNode(Node):
         self.bad_inputs = 0
         self.bad_inputs_said = 0            # ... up to the last diagnostics
         self.timed_plans = deque()          # from the worker thread to the loop
+        self.plan_calls = {}                # planner calls not yet answered: future -> sent at
         self.workers = ThreadPoolExecutor(max_workers=1, thread_name_prefix='timing')
         self.last_state = None
         self.log_budget = LogBudget(LOG_LINES_PER_WINDOW, LOG_WINDOW_S)
@@ -291,7 +292,8 @@ class ControllerNode(Node):
         except Exception as error:              # a bug must stop the arm, not the node
             self.get_logger().error(f'control step failed: {error!r}',
                                     throttle_duration_sec=1.0)
-            self.core.estop(now, f'internal error in the control step: {error!r}')
+            self.core.estop(now, f'internal error in the control step: {error!r}',
+                            cut_power=True)
             voltage = np.zeros(2)
         self.publish_voltage(voltage)
         self.send_plan_requests()
@@ -311,6 +313,7 @@ class ControllerNode(Node):
         self.voltage_pub.publish(Float64MultiArray(data=[float(v) for v in voltage]))
 
     def send_plan_requests(self) -> None:
+        self.forget_unanswered_plans()
         ready = self.plan_client.service_is_ready()
         self.core.planner_note = '' if ready else 'the plan_path service is not available'
         if not ready:
@@ -321,8 +324,19 @@ class ControllerNode(Node):
             message.start = self.pose(*start)
             message.goal = self.pose(*request.goal.xy, 0.0)
             future = self.plan_client.call_async(message)
+            self.plan_calls[future] = self.now_s()
             future.add_done_callback(
                 lambda done, request=request: self.on_plan_response(request, done))
+
+    def forget_unanswered_plans(self) -> None:
+        """A call the planner will never answer (restarted with it in flight) would stay in
+        the client's pending requests for good. Long after the core gave up on it (its
+        planner_timeout_s), the client forgets it; an answer after that is ignored."""
+        now = self.now_s()
+        for future, sent_s in list(self.plan_calls.items()):
+            if now - sent_s > 2.0 * self.config.planner_timeout_s:
+                self.plan_client.remove_pending_request(future)
+                del self.plan_calls[future]
 
     def pose(self, x, y, yaw) -> PoseStamped:
         pose = PoseStamped()
@@ -334,6 +348,7 @@ class ControllerNode(Node):
     @guarded
     def on_plan_response(self, request, future) -> None:
         """Runs in the executor: turn poses into joint angles, then time them off-loop."""
+        self.plan_calls.pop(future, None)
         try:
             path = future.result().plan
             poses = [(p.pose.position.x, p.pose.position.y, yaw_of(p.pose.orientation))

@@ -3,7 +3,9 @@
 A configuration q = (shoulder, elbow) is forbidden when a joint is past its limit, the elbow
 is folded tighter than ``min_elbow_fold_rad``, or any point of either link -- checked along
 the whole segment, not only at its ends -- lies inside a forbidden rectangle grown by
-``clearance_m``. Everything works on arrays of configurations at once.
+``clearance_m``. With a ``margin_rad``, so is every configuration within that of one on
+both joints: a joint-space margin, since a Cartesian one cannot hold for a shoulder pivot on
+the floor's edge. Everything works on arrays of configurations at once.
 """
 
 import math
@@ -30,11 +32,17 @@ def segments_hit_rectangle(x0, y0, x1, y1, rect) -> np.ndarray:
     return t_enter <= t_leave
 
 
+# Where ``clear_by`` looks: the corners and edge midpoints of a square of half-width 1.
+_SQUARE = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0],
+                    [1.0, 1.0], [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0], [0.0, 0.0]])
+
+
 class ForbiddenSpace:
     """The arm's forbidden configurations, from its links, limits and world."""
 
-    def __init__(self, arm: ArmConfig):
+    def __init__(self, arm: ArmConfig, margin_rad: float = 0.0):
         self.arm = arm
+        self.margin_rad = margin_rad
         self.upper_m = arm.shoulder.length_m
         self.fore_m = arm.elbow.length_m
         # Touching a region's edge is allowed (the shoulder pivot sits on the floor's):
@@ -70,7 +78,10 @@ class ForbiddenSpace:
         return hit
 
     def is_free(self, q) -> np.ndarray | bool:
-        """True where q (shape (..., 2)) is allowed."""
+        """True where q (shape (..., 2)) is allowed (and clear by ``margin_rad``)."""
+        return self.clear_by(q, self.margin_rad) if self.margin_rad > 0.0 else self._free(q)
+
+    def _free(self, q) -> np.ndarray | bool:
         q = np.asarray(q, dtype=float)
         free = self.within_limits(q) & ~self.collides(q)
         return bool(free) if free.ndim == 0 else free
@@ -78,6 +89,8 @@ class ForbiddenSpace:
     def why_forbidden(self, q) -> str | None:
         """A sentence saying why q is forbidden, or None when it is free."""
         q = np.asarray(q, dtype=float)
+        if self.margin_rad > 0.0 and self._free(q) and not self.is_free(q):
+            return f'within {math.degrees(self.margin_rad):.1f} deg of forbidden space'
         for joint, angle, (low, high) in zip(self.arm.joints, q, self.limits):
             if not low <= angle <= high:
                 return (f'{joint.name} at {math.degrees(angle):.1f} deg is past its limits '
@@ -101,6 +114,32 @@ class ForbiddenSpace:
     def path_is_free(self, path, step_rad: float) -> bool:
         path = np.asarray(path, float)
         return all(self.segment_is_free(a, b, step_rad) for a, b in zip(path[:-1], path[1:]))
+
+    def clear_by(self, q, margin_rad: float) -> np.ndarray | bool:
+        """Free, and so is every configuration within ``margin_rad`` of q on both joints
+        (checked at the corners and edge midpoints of that square)."""
+        q = np.asarray(q, dtype=float)
+        clear = np.all(self._free(q[..., None, :] + margin_rad * _SQUARE), axis=-1)
+        return bool(clear) if clear.ndim == 0 else clear
+
+    def nearest_clear(self, q, margin_rad: float, reach_rad: float,
+                      step_rad: float = 0.001745) -> np.ndarray | None:
+        """The configuration nearest q (joint-space distance, in steps of ``margin_rad``/2
+        and 5 deg of direction) that is ``clear_by`` the margin and reached by a straight
+        segment that, once free, stays free; None within ``reach_rad``."""
+        q = np.asarray(q, dtype=float)
+        radii = np.arange(0.0, reach_rad + 1e-12, margin_rad / 2.0)
+        angles = np.radians(np.arange(0.0, 360.0, 5.0))
+        directions = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
+        candidates = (q + radii[:, None, None] * directions).reshape(-1, 2)
+        distances = np.repeat(radii, len(angles))
+        for index in np.flatnonzero(self.clear_by(candidates, margin_rad)):
+            target = candidates[index]
+            count = max(2, int(math.ceil(distances[index] / step_rad)) + 1)
+            free = self._free(q + np.linspace(0.0, 1.0, count)[:, None] * (target - q))
+            if np.all(free[np.argmax(free):]):
+                return target
+        return None
 
     def lowest_point_m(self, q) -> np.ndarray:
         """The lowest y of either link (the shoulder pivot is at y = 0): floor clearance."""
