@@ -29,7 +29,7 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 from arm_control import config
-from arm_control.nodes.common import COMMANDS, LATCHED
+from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED
 
 START_Q = np.array(config.load('sim')[1].initial_position)
 DEG = math.pi / 180.0
@@ -212,10 +212,10 @@ class ArmRig:
 
     def ready(self, timeout_s: float = 40.0) -> None:
         """Wait for the planner and the controller, then put the arm at its start, held."""
-        assert self.spin_until(lambda: self.plan_client.service_is_ready()
+        assert self.spin_until(lambda: self.controller_sees_planner()
                                and self.state == 'waiting'
                                and self.goal_pub.get_subscription_count() > 0, timeout_s), \
-            f'not ready: arm_state {self.state!r}, planner {self.plan_client.service_is_ready()}'
+            f'not ready: arm_state {self.state!r}, planner {self.controller_sees_planner()}'
         self.reset_sim()
 
     def reset_sim(self) -> None:
@@ -271,6 +271,12 @@ class ArmRig:
             if values:
                 out.append(values)
         return out
+
+    def controller_sees_planner(self) -> bool:
+        """The controller's own client reaches the planner, by its latest diagnostics."""
+        said = [controller_sees_planner(m) for m in self.diagnostics.messages(-math.inf)]
+        said = [s for s in said if s is not None]
+        return bool(said) and said[-1]
 
     def node_diagnostics(self, name: str, since_s=-math.inf) -> list:
         out = []

@@ -254,6 +254,21 @@ def test_no_plan_in_time_rejects_the_goal_without_moving(arm, controller_config)
     assert np.max(np.abs(rig.true_q - held)) < 0.5 * DEG
 
 
+def test_the_planner_coming_and_going_is_said_once_each_and_named_in_a_failure(
+        arm, controller_config):
+    rig = Rig(arm, controller_config, planner=None)
+    for available in (False, False, True, True, False, False):
+        rig.core.on_planner_available(rig.now, available)
+        rig.run(0.1)
+    said = [e.message for e in rig.core.events if 'planner (plan_path)' in e.message]
+    assert said == ['waiting for the planner (plan_path) to appear',
+                    'the planner (plan_path) is available',
+                    'the planner (plan_path) is gone: goals fail until it is back']
+    rig.core.submit_preset(rig.now, 'back_score')
+    assert rig.run(controller_config.planner_timeout_s + 0.2, rig.in_state(ArmState.ERROR))
+    assert 'the plan_path service is not available' in rig.core.last_error
+
+
 def test_a_late_answer_to_a_cancelled_request_is_ignored(arm, controller_config, planner):
     rig = Rig(arm, controller_config, planner=None)
     rig.step()

@@ -148,8 +148,8 @@ def test_sim_on_one_host_controller_and_planner_on_the_other(hosts, tmp_path):
 def check(goal=(1.1, 0.9)) -> dict:
     """On the sim's host: wait for the controller across the wire, send a goal, watch the
     true state until it is reached."""
+    from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PointStamped
-    from nav_msgs.srv import GetPlan
     import numpy as np
     import rclpy
     from sensor_msgs.msg import JointState
@@ -157,7 +157,7 @@ def check(goal=(1.1, 0.9)) -> dict:
 
     from arm_control import config
     from arm_control.model.kinematics import TwoLinkKinematics
-    from arm_control.nodes.common import COMMANDS, LATCHED
+    from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED
     from arm_control.planning.cspace import ForbiddenSpace
 
     arm = config.load('sim')[0]
@@ -168,6 +168,13 @@ def check(goal=(1.1, 0.9)) -> dict:
     node.create_subscription(String, '/controller/events', lambda m: events.append(m.data), 50)
     node.create_subscription(JointState, '/sim/ground_truth',
                              lambda m: truth.append(list(m.position)), 10)
+    planner_seen = []               # by the controller, across its own host
+
+    def on_diagnostics(message):
+        seen = controller_sees_planner(message)
+        if seen is not None:
+            planner_seen.append(seen)
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
     goals = node.create_publisher(PointStamped, '/goal_point', COMMANDS)
     deadline = time.monotonic() + CHECK_TIMEOUT_S
 
@@ -176,9 +183,10 @@ def check(goal=(1.1, 0.9)) -> dict:
             rclpy.spin_once(node, timeout_sec=0.05)
         return condition()
 
-    planner = node.create_client(GetPlan, '/plan_path')
-    ready = spin_until(lambda: states and states[-1] == 'waiting' and planner.service_is_ready()
-                       and goals.get_subscription_count() > 0)
+    # Ready when the controller says so: holding, and its own client sees the planner (this
+    # host may discover the planner before the controller, on the planner's host, has).
+    ready = spin_until(lambda: states and states[-1] == 'waiting' and planner_seen
+                       and planner_seen[-1] and goals.get_subscription_count() > 0)
     message = PointStamped()
     message.header.frame_id = 'arm_base'
     message.point.x, message.point.y = goal
@@ -186,13 +194,16 @@ def check(goal=(1.1, 0.9)) -> dict:
     # The checker may see the controller's subscription before the controller has matched
     # this publisher over the wire; a goal sent in that gap is lost, so send it until the
     # controller says it has it.
+
+    def answers():
+        return [e for e in events if e.startswith('goal (')]
     for _ in range(5):
-        heard = len(events)
+        heard = len(answers())
         goals.publish(message)
         answer_by = min(time.monotonic() + 2.0, deadline)
-        while time.monotonic() < answer_by and len(events) == heard:
+        while time.monotonic() < answer_by and len(answers()) == heard:
             rclpy.spin_once(node, timeout_sec=0.05)
-        if len(events) > heard:
+        if len(answers()) > heard:
             break
     reached = spin_until(lambda: any(e.startswith('reached') for e in events))
     end = time.monotonic() + 0.5
@@ -204,7 +215,8 @@ def check(goal=(1.1, 0.9)) -> dict:
     contact = int(np.sum(~np.asarray(ForbiddenSpace(arm).is_free(q))))
     node.destroy_node()
     rclpy.try_shutdown()
-    return {'ready': bool(ready), 'reached': bool(reached), 'states': states[-4:],
+    return {'ready': bool(ready), 'controller sees the planner': planner_seen[-1:],
+            'reached': bool(reached), 'states': states[-4:],
             'events': events[-3:], 'true samples': len(truth), 'distance_m': distance,
             'contact': contact}
 

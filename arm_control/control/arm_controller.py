@@ -335,7 +335,7 @@ class ArmController:
         self.goal_q: Optional[np.ndarray] = None     # where the current trajectory ends
         self.arrived_s = -math.inf
         self.last_timed_plan: Optional[TimedPlan] = None
-        self.planner_note = ''          # said with a planner timeout, e.g. service not up
+        self.planner_available: Optional[bool] = None   # as the node's client sees it
 
         self.last_step_s: Optional[float] = None
         self.estimate_time_s: Optional[float] = None
@@ -750,7 +750,8 @@ class ArmController:
                     self.config.tracking_error_limit_rad:
                 self._moved(now_s)      # a small jump the PID takes back; a large one, not
         if self.pending is not None and now_s > self.goal_deadline_s:
-            note = f' ({self.planner_note})' if self.planner_note else ''
+            note = ' (the plan_path service is not available)' \
+                if self.planner_available is False else ''
             self._goal_failed(now_s, f'the planner did not answer within '
                                      f'{self.config.planner_timeout_s:g} s{note}')
         self.timeline.prune(now_s)
@@ -1034,6 +1035,20 @@ class ArmController:
         del self._new_events[:-EVENT_HISTORY]
 
     # ------------------------------------------------------------------ outputs
+
+    def on_planner_available(self, now_s: float, available: bool) -> None:
+        """Say when the planner comes or goes: a goal sent while it is away fails at its
+        planner timeout, and the reason should already be on record."""
+        if available == self.planner_available:
+            return
+        if available:
+            self._say(now_s, 'info', 'the planner (plan_path) is available')
+        elif self.planner_available is None:
+            self._say(now_s, 'info', 'waiting for the planner (plan_path) to appear')
+        else:
+            self._say(now_s, 'warning', 'the planner (plan_path) is gone: goals fail until '
+                                        'it is back')
+        self.planner_available = available
 
     def take_events(self) -> list[Event]:
         """Events since the last call (for the node to log and publish)."""

@@ -5,7 +5,9 @@ import os
 from pathlib import Path
 import sys
 
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from typing import Optional
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.exceptions import ParameterException
@@ -27,6 +29,9 @@ STATE_STREAM = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 # checked. Over a 10-minute soak: 9 such stalls of the controller, against 1 with loopback
 # UDP, which costs nothing at 50 Hz. Set before rclpy.init; a value the user set is kept.
 DDS_TRANSPORT = ('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
+
+# The controller's diagnostics key saying whether its client reaches the planner.
+PLANNER_AVAILABLE = 'planner available'
 
 # Parameters that name further parameters: (list parameter, prefix of the named ones).
 _NAMED_BY_LIST = (('world.forbidden_regions', 'world.regions.'), ('presets.names', 'presets.'))
@@ -59,6 +64,17 @@ def declare_parameters(node, node_name: str) -> dict:
     node.add_on_set_parameters_callback(lambda params: SetParametersResult(
         successful=False, reason='parameters are read once at start; restart the node'))
     return {name: node.get_parameter(name).value for name in declared}
+
+
+def controller_sees_planner(message: DiagnosticArray) -> Optional[bool]:
+    """Whether the controller's own client reaches the planner, from its diagnostics (None
+    if the message is not the controller's). Another node's view is no substitute: it may
+    discover the planner before the controller does, and a goal sent then fails."""
+    for status_ in message.status:
+        for value in status_.values:
+            if value.key == PLANNER_AVAILABLE:
+                return value.value == 'True'
+    return None
 
 
 def finite(values) -> bool:

@@ -39,8 +39,8 @@ from std_srvs.srv import SetBool, Trigger
 from arm_control.config import ArmConfig, ControllerConfig, JOINT_NAMES
 from arm_control.control.arm_controller import ArmController, SensorReading
 from arm_control.control.state_machine import ArmState
-from arm_control.nodes.common import (COMMANDS, declare_parameters, LATCHED, run,
-                                      STATE_STREAM, status)
+from arm_control.nodes.common import (COMMANDS, declare_parameters, LATCHED,
+                                      PLANNER_AVAILABLE, run, STATE_STREAM, status)
 from arm_control.planning.planner import waypoints_from_poses
 
 FRAME = 'arm_base'
@@ -315,7 +315,7 @@ class ControllerNode(Node):
     def send_plan_requests(self) -> None:
         self.forget_unanswered_plans()
         ready = self.plan_client.service_is_ready()
-        self.core.planner_note = '' if ready else 'the plan_path service is not available'
+        self.core.on_planner_available(self.now_s(), ready)
         if not ready:
             return                              # the core rejects the goal at its timeout
         for request in self.core.take_plan_requests():
@@ -441,6 +441,9 @@ class ControllerNode(Node):
         if worst > 3 * self.period_s:
             level = max(level, DiagnosticStatus.WARN)
             message += f'; control loop stalled for {worst:.3f} s'
+        if self.core.planner_available is False:
+            level = max(level, DiagnosticStatus.WARN)
+            message += '; the planner (plan_path) is not available: goals will fail'
         malformed, self.bad_inputs_said = self.bad_inputs - self.bad_inputs_said, self.bad_inputs
         if malformed:
             level = max(level, DiagnosticStatus.WARN)
@@ -456,6 +459,7 @@ class ControllerNode(Node):
             'joint_states stale': now - self.joint_states_s > self.config.joint_state_timeout_s,
             'motor_encoders age (s)': f'{encoders_age:.3f}',
             'bad inputs ignored': self.bad_inputs,
+            PLANNER_AVAILABLE: bool(self.core.planner_available),
         })
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()

@@ -1,17 +1,19 @@
 """The ``tour`` node: visits goals one by one and reports how each move went.
 
-Publishes each goal as a ``goal_point`` (PointStamped in arm_base), waits for the controller's
-``arm_state`` to settle in ``holding`` (or to refuse the goal), and logs the move time and the
-error the arm is held at, measured on ``/sim/ground_truth`` ``hold_check_s`` after arrival: by
-then the arm is still, so a true state that reaches this node late cannot skew it. It is the
-demonstration the README's first command runs; with ROS installed, ``ros2 run arm_control
-tour`` does the same.
+Starts once the controller's diagnostics say its client reaches the planner (a goal sent
+before would be rejected). Publishes each goal as a ``goal_point`` (PointStamped in arm_base),
+waits for the controller's ``arm_state`` to settle in ``holding`` (or to refuse the goal), and
+logs the move time and the error the arm is held at, measured on ``/sim/ground_truth``
+``hold_check_s`` after arrival: by then the arm is still, so a true state that reaches this
+node late cannot skew it. It is the demonstration the README's first command runs; with ROS
+installed, ``ros2 run arm_control tour`` does the same.
 """
 
 import math
 import sys
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -19,7 +21,8 @@ from std_msgs.msg import String
 
 from arm_control.config import ArmConfig, ParameterError
 from arm_control.model.kinematics import TwoLinkKinematics
-from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, STATE_STREAM
+from arm_control.nodes.common import (COMMANDS, controller_sees_planner, declare_parameters,
+                                      LATCHED, run, STATE_STREAM)
 
 FINISHED, REFUSED = 'holding', ('error', 'estopped', 'disabled')
 
@@ -48,9 +51,11 @@ class TourNode(Node):
         self.sent_at = None
         self.arrived_after_s = None                  # the move time, once holding
         self.left_start_state = False
+        self.planner_seen = False                    # by the controller, from its diagnostics
         self.goal_pub = self.create_publisher(PointStamped, 'goal_point', COMMANDS)
         self.create_subscription(String, 'arm_state', self.on_state, LATCHED)
         self.create_subscription(JointState, 'sim/ground_truth', self.on_truth, STATE_STREAM)
+        self.create_subscription(DiagnosticArray, '/diagnostics', self.on_diagnostics, 10)
         self.create_timer(0.05, self.tick)
 
     def on_state(self, msg: String) -> None:
@@ -63,9 +68,15 @@ class TourNode(Node):
         if len(msg.position) == 2:
             self.true_q = tuple(msg.position)
 
+    def on_diagnostics(self, msg: DiagnosticArray) -> None:
+        seen = controller_sees_planner(msg)
+        if seen is not None:
+            self.planner_seen = seen
+
     def tick(self) -> None:
         if (self.true_q is None or self.state in ('', 'no_sensors')
-                or self.goal_pub.get_subscription_count() == 0):
+                or self.goal_pub.get_subscription_count() == 0
+                or (self.sent_at is None and not self.planner_seen)):
             return                                   # the arm is not up yet
         if self.sent_at is None:
             self.send_next()
