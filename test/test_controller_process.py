@@ -7,9 +7,9 @@ which the controller never sees.
 import dataclasses
 import math
 
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, TwistStamped
 from nav_msgs.msg import Path
-from nav_msgs.srv import GetPlan
 import numpy as np
 import pytest
 from sensor_msgs.msg import JointState
@@ -18,7 +18,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from arm_control import config
 from arm_control.model.kinematics import TwoLinkKinematics
-from arm_control.nodes.common import COMMANDS, LATCHED
+from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED
 from arm_control.planning.cspace import ForbiddenSpace
 
 SETTLE_TIMEOUT_S = 40.0
@@ -37,10 +37,13 @@ def start_arm(launch, probe, *ros_args):
     truth = probe.collect(JointState, '/sim/ground_truth')
     states = probe.collect(String, '/arm_state', LATCHED)
     events = probe.collect(String, '/controller/events', 50)
-    client = probe.node.create_client(GetPlan, '/plan_path')
-    assert probe.spin_until(lambda: client.service_is_ready() and states
-                            and states[-1].data == 'waiting', 30.0), \
-        f'not ready: arm_state {[s.data for s in states]}, planner {client.service_is_ready()}'
+    diagnostics = probe.collect(DiagnosticArray, '/diagnostics')
+
+    def controller_ready():          # holding, and its own client has found the planner
+        seen = [s for s in map(controller_sees_planner, diagnostics) if s is not None]
+        return seen and seen[-1] and states and states[-1].data == 'waiting'
+    assert probe.spin_until(controller_ready, 30.0), \
+        f'not ready: arm_state {[s.data for s in states]}, diagnostics {diagnostics[-1:]}'
     # The arm fell while the controller was starting: put it back, and watch from there on.
     assert probe.call(Trigger, '/sim/reset', Trigger.Request()).success
     start = np.array(config.load('sim')[1].initial_position)
