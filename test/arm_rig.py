@@ -274,9 +274,11 @@ class ArmRig:
 
     def controller_sees_planner(self) -> bool:
         """The controller's own client reaches the planner, by its latest diagnostics."""
-        said = [controller_sees_planner(m) for m in self.diagnostics.messages(-math.inf)]
-        said = [s for s in said if s is not None]
-        return bool(said) and said[-1]
+        for message in reversed(self.diagnostics.messages(-math.inf)):
+            seen = controller_sees_planner(message)
+            if seen is not None:
+                return seen
+        return False
 
     def node_diagnostics(self, name: str, since_s=-math.inf) -> list:
         out = []

@@ -4,7 +4,6 @@ import math
 import os
 from pathlib import Path
 import sys
-
 from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
