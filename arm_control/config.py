@@ -1,166 +1,53 @@
-"""The arm description and each node's settings, read once from ROS parameters.
+"""The arm description and each node's settings: frozen, validated, read once.
 
-Parameters arrive as a flat mapping of dotted names to values -- what a ROS parameter file
-holds and what a node's declared parameters give back -- and are validated here, so a bad
-value fails at start with a message that names the parameter and its value.
-``config/arm.yaml`` is the one source of every default.
+Parameters arrive as a flat mapping of dotted names to values (``arm_control.parameters``),
+what a ROS parameter file holds and what a node's declared parameters give back. They are
+validated here, so a bad value fails at start with a message naming the parameter and its
+value. ``config/arm.yaml`` is the one source of every default.
 """
 
 from dataclasses import dataclass
+import functools
 import math
-from pathlib import Path
-import re
 from typing import Any, Mapping
 
-import yaml
+from arm_control.parameters import ParameterError, read_parameter_files, Reader
 
-PACKAGE = 'arm_control'
 JOINT_NAMES = ('shoulder', 'elbow')
-
-
-class ParameterError(ValueError):
-    """A parameter is missing, of the wrong type or out of range."""
-
-
-def default_parameter_file(name: str = 'arm.yaml') -> Path:
-    """The installed ``share/arm_control/config/<name>``, else the source tree's copy."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        installed = Path(get_package_share_directory(PACKAGE)) / 'config' / name
-        if installed.is_file():
-            return installed
-    except (ImportError, LookupError, OSError, ValueError):
-        pass
-    return Path(__file__).resolve().parents[1] / 'config' / name
-
-
-def read_parameter_file(path, node_name: str) -> dict[str, Any]:
-    """Flatten a ROS parameter file into ``{dotted.name: value}`` as ``node_name`` sees it.
-
-    The ``/**`` section applies to every node; ``/<node_name>`` (or ``<node_name>``) overrides it.
-    """
-    try:
-        document = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError) as error:
-        raise ParameterError(f'cannot read parameter file {path}: {error}') from error
-    if not isinstance(document, dict):
-        raise ParameterError(f'parameter file {path} is not a mapping of node sections')
-    flat: dict[str, Any] = {}
-    for section in ('/**', node_name, '/' + node_name):
-        body = document.get(section)
-        if body is None:
-            continue
-        if not isinstance(body, dict) or not isinstance(body.get('ros__parameters'), dict):
-            raise ParameterError(f"section '{section}' of {path} has no ros__parameters mapping")
-        _flatten(body['ros__parameters'], '', flat)
-    return flat
-
-
-def parameter_descriptions(path) -> dict[str, str]:
-    """Each parameter's description: the comment on its line of the file, else its section's.
-
-    The comments in ``config/arm.yaml`` are the one place a parameter is described.
-    """
-    descriptions: dict[str, str] = {}
-    stack: list[tuple[int, str, str]] = []      # (indent, key, comment) of open sections
-    for line in Path(path).read_text().splitlines():
-        match = re.match(r'^(\s*)([\w/*]+):\s*([^#]*?)\s*(?:#\s*(.*))?$', line)
-        if not match:
-            continue
-        indent, key, value, comment = len(match[1]), match[2], match[3], match[4] or ''
-        while stack and stack[-1][0] >= indent:
-            stack.pop()
-        if value:
-            names = [k for _, k, _ in stack if not k.startswith('/') and k != 'ros__parameters']
-            inherited = next((c for _, _, c in reversed(stack) if c), '')
-            descriptions['.'.join(names + [key])] = comment or inherited
-        else:
-            stack.append((indent, key, comment))
-    return descriptions
-
-
-def _flatten(tree: dict, prefix: str, out: dict) -> None:
-    for key, value in tree.items():
-        name = f'{prefix}{key}'
-        if isinstance(value, dict):
-            _flatten(value, name + '.', out)
-        else:
-            out[name] = value
-
-
-class _Reader:
-    """Typed, range-checked access to a flat parameter mapping."""
-
-    def __init__(self, params: Mapping[str, Any]):
-        self.params = params
-
-    def _raw(self, name):
-        if name not in self.params or self.params[name] is None:
-            raise ParameterError(f"parameter '{name}' is missing")
-        return self.params[name]
-
-    def number(self, name, *, low=-math.inf, high=math.inf, low_open=False) -> float:
-        value = self._raw(name)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ParameterError(f"parameter '{name}' = {value!r}: expected a number")
-        value = float(value)
-        too_low = value <= low if low_open else value < low
-        if not math.isfinite(value) or too_low or value > high:
-            bound = f"{'>' if low_open else '>='} {low}" if too_low else f'<= {high}'
-            if not math.isfinite(value):
-                bound = 'finite'
-            raise ParameterError(f"parameter '{name}' = {value!r}: must be {bound}")
-        return value
-
-    def positive(self, name) -> float:
-        return self.number(name, low=0.0, low_open=True)
-
-    def nonnegative(self, name) -> float:
-        return self.number(name, low=0.0)
-
-    def integer(self, name, *, low=-(2 ** 63)) -> int:
-        value = self._raw(name)
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ParameterError(f"parameter '{name}' = {value!r}: expected an integer")
-        if value < low:
-            raise ParameterError(f"parameter '{name}' = {value!r}: must be >= {low}")
-        return value
-
-    def boolean(self, name) -> bool:
-        value = self._raw(name)
-        if not isinstance(value, bool):
-            raise ParameterError(f"parameter '{name}' = {value!r}: expected true or false")
-        return value
-
-    def numbers(self, name, length: int) -> tuple[float, ...]:
-        value = self._raw(name)
-        if (isinstance(value, (str, bytes)) or not hasattr(value, '__len__')
-                or len(value) != length):
-            raise ParameterError(f"parameter '{name}' = {value!r}: expected {length} numbers")
-        out = []
-        for item in value:
-            if isinstance(item, bool) or not isinstance(item, (int, float)) \
-                    or not math.isfinite(item):
-                raise ParameterError(f"parameter '{name}' = {value!r}: expected finite numbers")
-            out.append(float(item))
-        return tuple(out)
-
-    def strings(self, name) -> tuple[str, ...]:
-        value = self._raw(name)
-        if isinstance(value, str) or not all(isinstance(item, str) for item in value):
-            raise ParameterError(f"parameter '{name}' = {value!r}: expected a list of names")
-        return tuple(item for item in value if item)
+FRAME_ID = 'arm_base'
 
 
 @dataclass(frozen=True)
-class MotorConfig:
-    """One DC motor's datasheet numbers."""
+class MotorDatasheet:
+    """One DC motor's datasheet numbers, taken at ``nominal_voltage``."""
 
+    name: str
     stall_torque_nm: float
     stall_current_a: float
     free_speed_rpm: float
     free_current_a: float
-    datasheet_voltage: float
+    nominal_voltage: float
+
+
+@functools.lru_cache(maxsize=None)
+def wpilib_motors() -> dict[str, MotorDatasheet]:
+    """WPILib's DCMotor catalogue (robotpy-wpimath), by the names of its factories."""
+    from wpimath.system.plant import DCMotor
+    catalogue = {}
+    for name in dir(DCMotor):
+        factory = getattr(DCMotor, name)
+        if name.startswith('_') or not callable(factory):
+            continue
+        try:
+            motor = factory(1)
+        except TypeError:               # an instance method, not a factory
+            continue
+        if isinstance(motor, DCMotor):
+            catalogue[name] = MotorDatasheet(
+                name, motor.stallTorque, motor.stallCurrent,
+                motor.freeSpeed * 60.0 / (2.0 * math.pi), motor.freeCurrent,
+                motor.nominalVoltage)
+    return catalogue
 
 
 @dataclass(frozen=True)
@@ -172,8 +59,10 @@ class JointConfig:
     mass_kg: float
     com_from_joint_m: float
     inertia_about_com_kgm2: float
+    motor: MotorDatasheet
     motor_count: int
     gear_ratio: float
+    current_limit_a: float          # per motor; inf when the motor controller has none
     min_angle_rad: float
     max_angle_rad: float
     viscous_friction_nm_s_per_rad: float
@@ -181,6 +70,15 @@ class JointConfig:
     potentiometer_noise_rad: float
     velocity_noise_rad_s: float
     encoder_backlash_rad: float
+
+
+@dataclass(frozen=True)
+class BatteryConfig:
+    """WPILib's BatterySim: V_bus = V_nominal − R·I_supply; the roboRIO's brownout."""
+
+    nominal_voltage: float
+    resistance_ohm: float
+    brownout_voltage: float
 
 
 @dataclass(frozen=True)
@@ -196,21 +94,21 @@ class Rectangle:
 
 @dataclass(frozen=True)
 class WorldConfig:
-    """Where the arm may not go."""
+    """Where the arm may not go, and how finely that is checked."""
 
     regions: tuple[Rectangle, ...]
     clearance_m: float
     clearance_rad: float
     min_elbow_fold_rad: float
+    check_step_rad: float
 
 
 @dataclass(frozen=True)
 class ArmConfig:
-    """The arm every node shares: physics, drive, sensors, world and named goals."""
+    """The arm every node shares: physics, drive, power, sensors, world and named goals."""
 
     gravity_mps2: float
-    max_voltage: float
-    motor: MotorConfig
+    battery: BatteryConfig
     shoulder: JointConfig
     elbow: JointConfig
     world: WorldConfig
@@ -228,19 +126,19 @@ class ArmConfig:
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'ArmConfig':
-        read = _Reader(params)
-        motor = MotorConfig(
-            stall_torque_nm=read.positive('motor.stall_torque_nm'),
-            stall_current_a=read.positive('motor.stall_current_a'),
-            free_speed_rpm=read.positive('motor.free_speed_rpm'),
-            free_current_a=read.nonnegative('motor.free_current_a'),
-            datasheet_voltage=read.positive('motor.datasheet_voltage'),
-        )
-        if motor.free_current_a >= motor.stall_current_a:
+        read = Reader(params)
+        motors = dict(wpilib_motors())
+        for name in read.strings('motors.names'):
+            motors[name] = _read_datasheet(read, name)
+        joints = [_read_joint(read, name, motors) for name in JOINT_NAMES]
+        battery = BatteryConfig(
+            nominal_voltage=read.positive('battery.nominal_voltage'),
+            resistance_ohm=read.nonnegative('battery.resistance_ohm'),
+            brownout_voltage=read.nonnegative('battery.brownout_voltage'))
+        if battery.brownout_voltage >= battery.nominal_voltage:
             raise ParameterError(
-                f"parameter 'motor.free_current_a' = {motor.free_current_a}: "
-                f'must be below motor.stall_current_a = {motor.stall_current_a}')
-        joints = [_read_joint(read, name) for name in JOINT_NAMES]
+                f"parameter 'battery.brownout_voltage' = {battery.brownout_voltage}: must be "
+                f'below battery.nominal_voltage = {battery.nominal_voltage}')
         regions = []
         for name in read.strings('world.forbidden_regions'):
             x_min, y_min, x_max, y_max = read.numbers(f'world.regions.{name}', 4)
@@ -254,25 +152,43 @@ class ArmConfig:
             clearance_m=read.nonnegative('world.clearance_m'),
             clearance_rad=read.number('world.clearance_rad', low=0.0, high=0.2),
             min_elbow_fold_rad=read.number('world.min_elbow_fold_rad', low=0.0, high=math.pi),
+            check_step_rad=read.number('world.check_step_rad', low=1e-5, high=0.05),
         )
         presets = tuple((name, *read.numbers(f'presets.{name}', 2))
                         for name in read.strings('presets.names'))
-        return cls(
-            gravity_mps2=read.nonnegative('gravity_mps2'),
-            max_voltage=read.positive('max_voltage'),
-            motor=motor, shoulder=joints[0], elbow=joints[1], world=world, presets=presets,
-        )
+        return cls(gravity_mps2=read.nonnegative('gravity_mps2'), battery=battery,
+                   shoulder=joints[0], elbow=joints[1], world=world, presets=presets)
 
 
-def _read_joint(read: _Reader, name: str) -> JointConfig:
+def _read_datasheet(read: Reader, name: str) -> MotorDatasheet:
+    key = f'motors.{name}'
+    stall_torque, stall_current, free_rpm, free_current, volts = read.numbers(key, 5)
+    if min(stall_torque, stall_current, free_rpm, volts) <= 0.0 or free_current < 0.0 \
+            or free_current >= stall_current:
+        raise ParameterError(
+            f"parameter '{key}' = {[stall_torque, stall_current, free_rpm, free_current, volts]}"
+            ': expected [stall torque N m, stall current A, free speed rpm, free current A, '
+            'volts], all positive, the free current below the stall current')
+    return MotorDatasheet(name, stall_torque, stall_current, free_rpm, free_current, volts)
+
+
+def _read_joint(read: Reader, name: str, motors: dict) -> JointConfig:
+    motor_name = read.text(f'{name}.motor')
+    if motor_name not in motors:
+        raise ParameterError(
+            f"parameter '{name}.motor' = {motor_name!r}: not a motor of motors.names nor of "
+            f"WPILib's DCMotor catalogue ({', '.join(sorted(motors))})")
+    current_limit = read.nonnegative(f'{name}.current_limit_a')
     joint = JointConfig(
         name=name,
         length_m=read.positive(f'{name}.length_m'),
         mass_kg=read.nonnegative(f'{name}.mass_kg'),
         com_from_joint_m=read.nonnegative(f'{name}.com_from_joint_m'),
         inertia_about_com_kgm2=read.nonnegative(f'{name}.inertia_about_com_kgm2'),
+        motor=motors[motor_name],
         motor_count=read.integer(f'{name}.motor_count', low=1),
         gear_ratio=read.positive(f'{name}.gear_ratio'),
+        current_limit_a=current_limit if current_limit > 0.0 else math.inf,
         min_angle_rad=read.number(f'{name}.min_angle_rad'),
         max_angle_rad=read.number(f'{name}.max_angle_rad'),
         viscous_friction_nm_s_per_rad=read.nonnegative(f'{name}.viscous_friction_nm_s_per_rad'),
@@ -305,7 +221,7 @@ class SimConfig:
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'SimConfig':
-        read = _Reader(params)
+        read = Reader(params)
         return cls(
             publish_rate_hz=read.number('publish_rate_hz', low=0.0, high=1000.0, low_open=True),
             physics_step_s=read.number('physics_step_s', low=0.0, high=0.001, low_open=True),
@@ -333,8 +249,8 @@ class ControllerConfig:
     planner_timeout_s: float
     feedback_voltage_reserve: float
     driving_voltage_reserve: float
-    max_velocity_rad_s: tuple[float, float]
-    max_acceleration_rad_s2: tuple[float, float]
+    max_velocity_rad_s: tuple[float, float]         # inf: no cap beyond the motors'
+    max_acceleration_rad_s2: tuple[float, float]    # inf: no cap beyond the motors'
     shoulder_pid: tuple[float, float, float]
     elbow_pid: tuple[float, float, float]
     integrator_limit_v: float
@@ -342,15 +258,20 @@ class ControllerConfig:
     driver_command_timeout_s: float
     process_noise_rad_s2: float
 
+    @property
+    def period_s(self) -> float:
+        return 1.0 / self.loop_rate_hz
+
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'ControllerConfig':
-        read = _Reader(params)
+        read = Reader(params)
 
-        def positive_pair(name):
+        def caps(name):
             pair = read.numbers(name, 2)
-            if min(pair) <= 0.0:
-                raise ParameterError(f"parameter '{name}' = {list(pair)}: must be > 0")
-            return pair
+            if min(pair) < 0.0:
+                raise ParameterError(f"parameter '{name}' = {list(pair)}: must be >= 0 "
+                                     '(0: no cap beyond what the motors give)')
+            return tuple(v if v > 0.0 else math.inf for v in pair)
 
         def gains(name):
             triple = read.numbers(name, 3)
@@ -372,8 +293,8 @@ class ControllerConfig:
             planner_timeout_s=read.positive('planner_timeout_s'),
             feedback_voltage_reserve=read.nonnegative('feedback_voltage_reserve'),
             driving_voltage_reserve=read.nonnegative('driving_voltage_reserve'),
-            max_velocity_rad_s=positive_pair('max_velocity_rad_s'),
-            max_acceleration_rad_s2=positive_pair('max_acceleration_rad_s2'),
+            max_velocity_rad_s=caps('max_velocity_rad_s'),
+            max_acceleration_rad_s2=caps('max_acceleration_rad_s2'),
             shoulder_pid=gains('shoulder_pid'),
             elbow_pid=gains('elbow_pid'),
             integrator_limit_v=read.nonnegative('integrator_limit_v'),
@@ -382,26 +303,39 @@ class ControllerConfig:
             process_noise_rad_s2=read.positive('process_noise_rad_s2'),
         )
 
+    def check_against(self, arm: ArmConfig) -> None:
+        """Settings that only make sense for this arm: each reserve leaves the trajectory
+        some of the battery's volts."""
+        for name in ('driving_voltage_reserve', 'feedback_voltage_reserve'):
+            reserve = getattr(self, name)
+            if reserve >= arm.battery.nominal_voltage:
+                raise ParameterError(
+                    f"parameter '{name}' = {reserve}: leaves nothing of "
+                    f'battery.nominal_voltage = {arm.battery.nominal_voltage} V for the '
+                    'trajectory')
+
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    """The configuration-space grid and the collision-check step."""
+    """The configuration-space grid."""
 
     grid_resolution_rad: float
-    check_step_rad: float
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'PlannerConfig':
-        read = _Reader(params)
-        return cls(
-            grid_resolution_rad=read.number('grid_resolution_rad', low=0.001, high=0.2),
-            check_step_rad=read.number('check_step_rad', low=1e-5, high=0.05),
-        )
+        read = Reader(params)
+        return cls(grid_resolution_rad=read.number('grid_resolution_rad', low=0.001, high=0.2))
 
 
-def load(node_name: str, path=None):
-    """``(ArmConfig, <node's config>)`` from a parameter file, for tests and benchmarks."""
-    params = read_parameter_file(path or default_parameter_file(), node_name)
-    node_config = {'sim': SimConfig, 'controller': ControllerConfig,
-                   'planner': PlannerConfig}[node_name]
-    return ArmConfig.from_parameters(params), node_config.from_parameters(params)
+NODE_CONFIGS = {'sim': SimConfig, 'controller': ControllerConfig, 'planner': PlannerConfig}
+
+
+def load(node_name: str, *paths):
+    """``(ArmConfig, <node's config>)`` from the defaults with ``paths`` layered over them,
+    for tests, benchmarks and tools (nodes read their declared parameters instead)."""
+    params = read_parameter_files(paths, node_name)
+    arm = ArmConfig.from_parameters(params)
+    node_config = NODE_CONFIGS[node_name].from_parameters(params)
+    if isinstance(node_config, ControllerConfig):
+        node_config.check_against(arm)
+    return arm, node_config

@@ -56,7 +56,7 @@ from arm_control.control.trajectory import (time_optimal_trajectory,  # noqa: E4
 from arm_control.model.dynamics import ArmDynamics  # noqa: E402
 from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
 from arm_control.model.plant import ArmPlant  # noqa: E402
-from arm_control.planning.cspace import ForbiddenSpace  # noqa: E402
+from arm_control.model.world import ForbiddenSpace  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
 
 HOLD_BEFORE_S = 0.5
@@ -96,7 +96,8 @@ class SeedController:
             rod_torque = joint.mass_kg * self.arm.gravity_mps2 * joint.length_m / 2 \
                 * math.cos(heading)
             voltage.append(feedback + motor.voltage_for(rod_torque, 0.0))
-        return np.clip(voltage, -self.arm.max_voltage, self.arm.max_voltage)
+        volts = self.arm.battery.nominal_voltage
+        return np.clip(voltage, -volts, volts)
 
 
 class PlanHandOff:
@@ -295,7 +296,7 @@ def minimum_times(arm, controller_config, moves):
     dynamics, forbidden = ArmDynamics(arm), ForbiddenSpace(arm)
     planner = Planner(arm, config.load('planner')[1])
     validator = GoalValidator(arm)
-    loose = TrajectoryLimits((1e3, 1e3), (1e4, 1e4), arm.max_voltage)
+    loose = TrajectoryLimits((1e3, 1e3), (1e4, 1e4), arm.battery.nominal_voltage)
     out = {}
     for name, start_xy, goal_xy in moves:
         move = Move(name, start_xy, goal_xy, arm, controller_config, dynamics, forbidden, None)
@@ -306,8 +307,8 @@ def minimum_times(arm, controller_config, moves):
             if not plan.ok:
                 continue
             waypoints = np.array(plan.waypoints_rad)
-            guess = bt._guess_from(time_optimal_trajectory(waypoints, dynamics, forbidden,
-                                                           loose), dynamics, arm.max_voltage)
+            fast = time_optimal_trajectory(waypoints, dynamics, forbidden, loose)
+            guess = bt._guess_from(fast, dynamics, arm.battery.nominal_voltage)
             knots = []
             for count in bt.KNOTS:
                 result = bt.minimum_time(arm, start_q, waypoints[-1], count, guess)
@@ -352,7 +353,8 @@ def minimum_time_zoh(arm, start_q, goal_q, guess, minimum_s, period_s=ZOH_PERIOD
                 k4 = f(state + h * k3, u[:, k])
                 state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
             opti.subject_to(x[:, k + 1] == state)
-        opti.subject_to(opti.bounded(-arm.max_voltage, casadi.vec(u), arm.max_voltage))
+        volts = arm.battery.nominal_voltage
+        opti.subject_to(opti.bounded(-volts, casadi.vec(u), volts))
         elbow_y = upper * casadi.sin(x[0, :])
         opti.subject_to(elbow_y >= 0)
         opti.subject_to(elbow_y + fore * casadi.sin(x[0, :] + x[1, :]) >= 0)

@@ -46,7 +46,7 @@ from arm_control.control.trajectory import (time_optimal_trajectory,  # noqa: E4
                                             trajectory_voltage, TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics, COULOMB_SMOOTHING_RAD_S  # noqa: E402
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError  # noqa: E402
-from arm_control.planning.cspace import ForbiddenSpace  # noqa: E402
+from arm_control.model.world import ForbiddenSpace  # noqa: E402
 
 KNOTS = (25, 50, 100)
 CONVERGED = 0.005           # relative change of the minimum time that counts as settled
@@ -182,7 +182,7 @@ def column_unshaped(move: Move) -> dict:
 
 def column_full_voltage(move: Move) -> dict:
     """The same path and method at the whole 12 V with no speed or acceleration limits."""
-    loose = TrajectoryLimits((1e3, 1e3), (1e4, 1e4), move.arm.max_voltage)
+    loose = TrajectoryLimits((1e3, 1e3), (1e4, 1e4), move.arm.battery.nominal_voltage)
     trajectory = time_optimal_trajectory(move.waypoints, move.dynamics, move.forbidden, loose)
     move.results['full_12v_s'] = trajectory.duration_s
     return {'12 V s': f'{trajectory.duration_s:.3f}'}
@@ -190,7 +190,7 @@ def column_full_voltage(move: Move) -> dict:
 
 def column_minimum_time(move: Move) -> dict:
     """Direct collocation on 25, 50, 100 knots: the time must settle (last change ≤ 0.5 %)."""
-    guess = _guess_from(move.trajectory, move.dynamics, move.arm.max_voltage)
+    guess = _guess_from(move.trajectory, move.dynamics, move.arm.battery.nominal_voltage)
     times, solve_s = [], 0.0
     for knots in KNOTS:
         begin = time.perf_counter()
@@ -318,7 +318,7 @@ def minimum_time(arm, start_q, goal_q, knots, guess):
         fm = f(xm[:, k], um[:, k])
         opti.subject_to(xm[:, k] == 0.5 * (x[:, k] + x[:, k + 1]) + h / 8 * (fk[k] - fk[k + 1]))
         opti.subject_to(x[:, k + 1] - x[:, k] == h / 6 * (fk[k] + 4 * fm + fk[k + 1]))
-    limit_v = arm.max_voltage
+    limit_v = arm.battery.nominal_voltage
     fold = math.pi - arm.world.min_elbow_fold_rad
     upper, fore = arm.shoulder.length_m, arm.elbow.length_m
     for states, volts in ((x, u), (xm, um)):
@@ -374,7 +374,8 @@ def main(count=None):
     keys = list(dict.fromkeys(k for row in rows for k in row))
     print(f'trajectory limits: {limits.budget[0]:g} V driving, {limits.budget[1]:g} V '
           f'braking, velocity {limits.max_velocity_rad_s} rad/s, acceleration '
-          f'{limits.max_acceleration_rad_s2} rad/s^2; minimum time at {arm.max_voltage:g} V, '
+          f'{limits.max_acceleration_rad_s2} rad/s^2; minimum time at '
+          f'{arm.battery.nominal_voltage:g} V, '
           'free path')
     print('| ' + ' | '.join(keys) + ' |')
     print('|' + '---|' * len(keys))

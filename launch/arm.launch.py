@@ -29,10 +29,11 @@ def _arm_node(executable, condition=None):
 
 def _robot_state_publisher(context):
     """robot_state_publisher with the URDF generated from ``params_file``."""
-    from arm_control.config import ArmConfig, read_parameter_file
+    from arm_control.config import ArmConfig
+    from arm_control.parameters import read_parameter_files
     from arm_control.visual.urdf import arm_urdf
     params_file = LaunchConfiguration('params_file').perform(context)
-    arm = ArmConfig.from_parameters(read_parameter_file(params_file, 'robot_state_publisher'))
+    arm = ArmConfig.from_parameters(read_parameter_files([params_file], 'robot_state_publisher'))
     return [Node(package='robot_state_publisher', executable='robot_state_publisher',
                  name='robot_state_publisher', output='screen',
                  parameters=[{'robot_description': arm_urdf(arm)}],

@@ -11,7 +11,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from arm_control.config import parameter_descriptions  # noqa: E402
+from arm_control.parameters import parameter_descriptions  # noqa: E402
 
 BEGIN, END = '<!-- parameters:begin -->', '<!-- parameters:end -->'
 

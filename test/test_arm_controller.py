@@ -19,7 +19,7 @@ from arm_control.control.trajectory import time_optimal_trajectory, TrajectoryLi
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.plant import ArmPlant
-from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.planner import Planner
 
 START = (1.5708, -1.5708)        # the sim's default: upper arm up, forearm level forward
@@ -104,7 +104,7 @@ def test_reaches_every_preset_in_order_within_tolerance(arm, controller_config, 
     for (_, x, y) in arm.presets[-1:]:
         assert rig.kinematics.forward(rig.true_q) == pytest.approx((x, y), abs=0.02)
     assert rig.lowest_m == 0.0                          # no point of either link below y = 0
-    assert np.max(np.abs(rig.voltages)) <= arm.max_voltage
+    assert np.max(np.abs(rig.voltages)) <= arm.battery.nominal_voltage
     reached = [e.message for e in rig.core.events if e.message.startswith('reached')]
     assert [m.split()[1:3] for m in reached] == [['preset', f"'{n}'"] for n in names]
 

@@ -1,16 +1,19 @@
 """The parameter file is the one source, and bad values are refused by name."""
 
+import dataclasses
 import math
 
 import pytest
 
 from arm_control import config
-from arm_control.config import ArmConfig, ParameterError, read_parameter_file, SimConfig
+from arm_control import parameters
+from arm_control.config import ArmConfig, SimConfig
+from arm_control.parameters import ParameterError, read_parameter_file
 
 
 @pytest.fixture
 def params():
-    return read_parameter_file(config.default_parameter_file(), 'sim')
+    return read_parameter_file(parameters.default_parameter_file(), 'sim')
 
 
 def test_default_file_describes_the_seed_arm(params):
@@ -28,7 +31,11 @@ def test_default_file_describes_the_seed_arm(params):
     ('shoulder.mass_kg', -30.0, 'must be >= 0'),
     ('elbow.gear_ratio', 0.0, 'must be > 0'),
     ('shoulder.length_m', 'long', 'expected a number'),
-    ('motor.stall_current_a', math.nan, 'must be finite'),
+    ('motors.seed_cim', [2.42, math.nan, 5330.0, 2.7, 12.0], 'expected finite numbers'),
+    ('motors.seed_cim', [2.42, 133.0, 5330.0, 140.0, 12.0], 'free current below'),
+    ('shoulder.motor', 'warp_drive', "WPILib's DCMotor catalogue"),
+    ('elbow.current_limit_a', -5.0, 'must be >= 0'),
+    ('battery.brownout_voltage', 13.0, 'must be below battery.nominal_voltage'),
     ('elbow.motor_count', 1.5, 'expected an integer'),
     ('world.regions.floor', [0.0, 0.0, -1.0, 1.0], 'min < max'),
     ('presets.stow', [0.25], 'expected 2 numbers'),
@@ -45,6 +52,39 @@ def test_a_missing_value_is_refused_naming_the_parameter(params):
     del params['elbow.length_m']
     with pytest.raises(ParameterError, match="'elbow.length_m' is missing"):
         ArmConfig.from_parameters(params)
+
+
+def test_a_joint_may_name_a_motor_of_wpilibs_catalogue(params):
+    params['elbow.motor'] = 'NEO'
+    elbow = ArmConfig.from_parameters(params).elbow
+    assert elbow.motor.free_speed_rpm == pytest.approx(5676.0, rel=1e-3)   # NEO datasheet
+    assert elbow.motor.stall_torque_nm == pytest.approx(2.6, rel=1e-3)
+
+
+def test_a_zero_current_limit_means_none(params):
+    params['shoulder.current_limit_a'] = 0.0
+    assert ArmConfig.from_parameters(params).shoulder.current_limit_a == math.inf
+
+
+def test_a_robot_file_layers_over_the_default_naming_only_what_differs():
+    """frc_robot.yaml changes the world, the presets and the gains; everything else is
+    arm.yaml's, as ``--params-file arm.yaml --params-file frc_robot.yaml`` gives it."""
+    robot = parameters.default_parameter_file('frc_robot.yaml')
+    default_arm, default_controller = config.load('controller')
+    arm, controller = config.load('controller', robot)
+    assert arm.shoulder == default_arm.shoulder and arm.elbow == default_arm.elbow
+    assert arm.battery == default_arm.battery
+    assert 'tower' in [region.name for region in arm.world.regions]
+    assert arm.world.clearance_rad == default_arm.world.clearance_rad
+    assert controller.shoulder_pid != default_controller.shoulder_pid
+    assert controller.loop_rate_hz == default_controller.loop_rate_hz
+
+
+def test_a_reserve_that_leaves_the_trajectory_no_volts_is_refused_by_name():
+    arm, controller = config.load('controller')
+    bad = dataclasses.replace(controller, feedback_voltage_reserve=12.5)
+    with pytest.raises(ParameterError, match="'feedback_voltage_reserve' = 12.5"):
+        bad.check_against(arm)
 
 
 def test_an_integer_where_a_float_is_expected_is_fine(params):
@@ -66,8 +106,8 @@ def test_unreadable_file_is_a_clear_error(tmp_path):
 
 
 def test_every_parameter_has_a_description():
-    path = config.default_parameter_file()
-    descriptions = config.parameter_descriptions(path)
+    path = parameters.default_parameter_file()
+    descriptions = parameters.parameter_descriptions(path)
     for node in ('sim', 'controller', 'planner'):
         for name in read_parameter_file(path, node):
             assert descriptions.get(name), f'{name} has no comment in {path.name}'

@@ -16,10 +16,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
-from arm_control import config
+from arm_control import config, parameters
 from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED
-from arm_control.planning.cspace import ForbiddenSpace
 
 SETTLE_TIMEOUT_S = 40.0
 
@@ -171,7 +171,7 @@ def test_services_estop_reset_cancel_enable(launch, probe, arm):
 
 @pytest.fixture
 def frc_robot_file():
-    return config.default_parameter_file('frc_robot.yaml')
+    return parameters.default_parameter_file('frc_robot.yaml')
 
 
 def test_frc_robot_every_move_planned_with_zero_contact(launch, probe, frc_robot_file):

@@ -102,13 +102,29 @@ def test_hard_stops_hold_the_arm_in_range(arm):
     assert plant.state[2] == 0.0 and plant.state[3] == 0.0
 
 
-def test_voltage_is_clamped_and_nan_refused(arm):
+def test_commands_are_clamped_to_the_battery_and_nan_refused(arm):
     plant = ArmPlant(arm, (1.0, 0.0))
     plant.set_voltage((30.0, -30.0))
-    assert plant.voltage == (12.0, -12.0)
+    assert plant.command == (12.0, -12.0)
     with pytest.raises(ValueError):
         plant.set_voltage((math.nan, 0.0))
-    assert plant.voltage == (12.0, -12.0)
+    assert plant.command == (12.0, -12.0)
+
+
+def test_the_batch_form_is_the_scalar_form(arm):
+    """One model: the arrays the timing uses give what the sim integrates, state by state."""
+    dynamics = ArmDynamics(with_joint(with_joint(arm, 'elbow', coulomb_friction_nm=3.0),
+                                      'shoulder', viscous_friction_nm_s_per_rad=20.0))
+    rng = np.random.default_rng(5)
+    x = rng.uniform(-3, 3, (50, 4))
+    u = rng.uniform(-12, 12, (50, 2))
+    qdd = rng.uniform(-20, 20, (50, 2))
+    batch_f = dynamics.derivatives(x, u)
+    batch_v = dynamics.voltages(x[:, :2], x[:, 2:], qdd)
+    for i in range(len(x)):
+        assert batch_f[i] == pytest.approx(dynamics.derivative(list(x[i]), u[i]), rel=1e-12)
+        assert batch_v[i] == pytest.approx(
+            dynamics.voltage_for(x[i, :2], x[i, 2:], qdd[i]), rel=1e-12)
 
 
 def test_viscous_friction_slows_an_unpowered_joint(arm):

@@ -25,7 +25,7 @@ import numpy as np
 from std_srvs.srv import Trigger
 
 from arm_control import config
-from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.model.world import ForbiddenSpace
 
 ARM, CONTROLLER = config.load('controller')
 FORBIDDEN = ForbiddenSpace(ARM)

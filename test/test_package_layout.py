@@ -51,5 +51,5 @@ def test_ament_index_marker_and_share_files(prefix):
 
 
 def test_installed_parameter_file_is_the_default(prefix):
-    from arm_control.config import default_parameter_file
+    from arm_control.parameters import default_parameter_file
     assert default_parameter_file() == prefix / 'share' / 'arm_control' / 'config' / 'arm.yaml'

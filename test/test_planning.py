@@ -10,7 +10,7 @@ import pytest
 
 from arm_control import config
 from arm_control.config import PlannerConfig, Rectangle
-from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.graph import ConfigurationGrid, DIRECTIONS
 from arm_control.planning.planner import (Plan, Planner, poses_from_waypoints, travel_rad,
                                           waypoints_from_poses)
@@ -201,7 +201,7 @@ def test_no_connection_when_a_pole_splits_front_from_back(arm):
     through the shoulder's stops, front and back are separate pieces of free space."""
     world = dataclasses.replace(arm.world, regions=arm.world.regions + (
         Rectangle('pole', -0.05, 0.5, 0.05, 10.0),))
-    planner = Planner(dataclasses.replace(arm, world=world), PlannerConfig(0.02, 0.001745))
+    planner = Planner(dataclasses.replace(arm, world=world), PlannerConfig(0.02))
     plan = planner.plan([math.radians(30), math.radians(20)], (-1.0, 0.5))
     assert not plan.ok
     assert plan.reason.startswith('no connection') and 'separates' in plan.reason
@@ -338,8 +338,9 @@ def test_lazy_edge_checks_find_the_brute_force_shortest_path(frc_forbidden):
 
 
 def test_plans_cost_no_more_than_the_brute_force_grid_path(frc_forbidden):
-    planner = Planner(frc_forbidden.arm, PlannerConfig(0.25, 0.01))
-    planner.forbidden = frc_forbidden
+    coarse = dataclasses.replace(frc_forbidden.arm, world=dataclasses.replace(
+        frc_forbidden.arm.world, check_step_rad=0.01))
+    planner = Planner(coarse, PlannerConfig(0.25))
     grid = planner.grid
     rng = np.random.default_rng(3)
     free_nodes = np.flatnonzero(grid.free.ravel())
@@ -439,7 +440,7 @@ def test_waypoints_to_poses_and_back_is_the_identity(frc, seed_planner):
 def test_poses_unwrap_near_the_start_when_a_joint_has_more_than_a_turn(arm):
     wide = dataclasses.replace(arm.elbow, min_angle_rad=-4.0, max_angle_rad=4.0)
     forbidden = ForbiddenSpace(dataclasses.replace(arm, elbow=wide))
-    kinematics = Planner(arm, PlannerConfig(0.1, 0.01)).kinematics
+    kinematics = Planner(arm, PlannerConfig(0.1)).kinematics
     path = np.array([[1.0, 3.5], [1.0, 3.9], [1.2, 3.0]])       # 3.5 ≡ -2.78, both in travel
     back = waypoints_from_poses(kinematics, poses_from_waypoints(kinematics, path), path[0],
                                 forbidden)

@@ -20,8 +20,8 @@ from std_srvs.srv import Trigger
 
 from arm_control import config
 from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.common import COMMANDS
-from arm_control.planning.cspace import ForbiddenSpace
 
 ARM, CONTROLLER = config.load('controller')
 KINEMATICS = TwoLinkKinematics(ARM.shoulder.length_m, ARM.elbow.length_m)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from arm_control.model.kinematics import TwoLinkKinematics
-from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.model.world import ForbiddenSpace
 from arm_control.visual import scene as scene_module
 from arm_control.visual.scene import (cspace_image, densify, GOAL_COLOUR, PATH_COLOUR,
                                       path_configurations, REACH_COLOUR, reachable_free, Scene,

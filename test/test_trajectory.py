@@ -14,7 +14,7 @@ from arm_control.control.trajectory import (BlendedPath, time_optimal_trajectory
                                             TrajectoryError, TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.plant import ArmPlant
-from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.model.world import ForbiddenSpace
 
 STEP_RAD = 0.001745
 VOLTAGE_TOLERANCE = 0.05         # V: as the trajectory module accepts
@@ -63,9 +63,9 @@ def test_limits_from_config_keep_the_feedback_reserve(setup):
     """The reserve for feedback on the braking side, the driving one's on the other."""
     arm, _, _, limits = setup
     _, controller = config.load('controller')
-    assert limits.budget == pytest.approx((arm.max_voltage - controller.driving_voltage_reserve,
-                                           arm.max_voltage - controller.feedback_voltage_reserve))
-    assert limits.max_velocity_rad_s == controller.max_velocity_rad_s
+    volts = arm.battery.nominal_voltage
+    assert limits.budget == pytest.approx((volts - controller.driving_voltage_reserve,
+                                           volts - controller.feedback_voltage_reserve))
 
 
 @pytest.mark.parametrize('name', sorted(PATHS))
@@ -429,7 +429,7 @@ def test_the_period_feedforward_keeps_the_held_arm_on_the_trajectory(setup):
     arm, dynamics, forbidden, limits = setup
     waypoints = PATHS['up to the front']
     trajectory = time_optimal_trajectory(waypoints, dynamics, forbidden, limits)
-    feedforward = trajectory_module.PeriodFeedforward(dynamics, 0.02, arm.max_voltage)
+    feedforward = trajectory_module.PeriodFeedforward(dynamics, 0.02, arm.battery.nominal_voltage)
     references = []
 
     def deadbeat(t):

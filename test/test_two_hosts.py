@@ -158,7 +158,7 @@ def check(goal=(1.1, 0.9)) -> dict:
     from arm_control import config
     from arm_control.model.kinematics import TwoLinkKinematics
     from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED
-    from arm_control.planning.cspace import ForbiddenSpace
+    from arm_control.model.world import ForbiddenSpace
 
     arm = config.load('sim')[0]
     rclpy.init()

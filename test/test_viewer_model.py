@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from visualization_msgs.msg import Marker
 
-from arm_control.config import ParameterError, read_parameter_file
 from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.parameters import ParameterError, read_parameter_file
 from arm_control.visual.markers import MarkerBuilder
 from arm_control.visual.scene import state_colour
 from arm_control.visual.viewer_model import STALE_AFTER_S, ViewerConfig, ViewerModel

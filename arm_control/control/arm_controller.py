@@ -52,7 +52,7 @@ import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.estimator import ArmEstimator
-from arm_control.control.goals import CHECK_STEP_RAD, choose_branch, Goal, GoalValidator
+from arm_control.control.goals import choose_branch, Goal, GoalValidator
 from arm_control.control.pid import ArmPid
 from arm_control.control.state_machine import (ArmState, COMMANDING, StateMachine, STOPPED,
                                                Trigger)
@@ -61,7 +61,7 @@ from arm_control.control.trajectory import (estimated_duration_s, PeriodFeedforw
                                             TrajectoryError, TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
-from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.model.world import ForbiddenSpace
 
 # A preempting goal's new trajectory starts this far ahead on the current one: the time
 # the planner and the timing need, so the switch happens on time. Doubled on each retry.
@@ -308,7 +308,7 @@ class ArmController:
         self.estimator = ArmEstimator(arm, config.process_noise_rad_s2)
         self.pid = ArmPid.from_config(config)
         self.period_feedforward = PeriodFeedforward(self.dynamics, 1.0 / config.loop_rate_hz,
-                                                    arm.max_voltage)
+                                                    arm.battery.nominal_voltage)
         self.machine = StateMachine()
         self.period_s = 1.0 / config.loop_rate_hz
         # Braking and driver mode count on what the motors surely give in any pose, which
@@ -560,11 +560,11 @@ class ArmController:
             out, rest = waypoints[:2], waypoints[1:]
         else:
             out, rest = None, waypoints
-        if len(rest) > 1 and not self.forbidden.path_is_free(rest, CHECK_STEP_RAD):
+        if len(rest) > 1 and not self.forbidden.path_is_free(rest):
             return None, f'the plan to {request.goal.label} enters forbidden space: refused'
         # A path that keeps the clearance is bent (when timing finds a faster shape) only
         # where it keeps it still.
-        space = self.clear_space if self.clear_space.path_is_free(rest, CHECK_STEP_RAD) \
+        space = self.clear_space if self.clear_space.path_is_free(rest) \
             else self.forbidden
         if out is None:
             return time_optimal_trajectory(rest, self.dynamics, space, self.limits,
@@ -828,7 +828,7 @@ class ArmController:
         feedback = np.array(self.pid.update(error, reference[2:] - estimate[2:], dt_s,
                                             self.saturated))
         total = feedforward + feedback
-        limit = self.arm.max_voltage
+        limit = self.arm.battery.nominal_voltage
         self.saturated = tuple(int(np.sign(v)) if abs(v) > limit else 0 for v in total)
         self.setpoint = (q_sp, qd_sp, qdd_sp)
         self.tracking_error_rad = error
@@ -893,7 +893,7 @@ class ArmController:
         if length == 0.0:
             return True
         end = q + travel * (1.0 + DRIVER_STOP_MARGIN_RAD / length)
-        return self.forbidden.segment_is_free(q, end, CHECK_STEP_RAD * 5)
+        return self.forbidden.segment_is_free(q, end, 5 * self.forbidden.check_step_rad)
 
     def _driver_timeout(self, now_s: float) -> None:
         stale = now_s - self.driver_command_s > self.config.driver_command_timeout_s

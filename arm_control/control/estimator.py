@@ -101,7 +101,7 @@ class ArmEstimator:
         """Advance the estimate by ``dt_s`` with ``voltage`` [Va, Vb] held (as applied)."""
         self._require_initialised()
         u = _finite_pair(voltage, 'voltage')
-        limit = self.arm.max_voltage
+        limit = self.arm.battery.nominal_voltage
         u = np.clip(u, -limit, limit)
         if not (math.isfinite(dt_s) and dt_s >= 0.0):
             raise ValueError(f'dt_s must be finite and non-negative, got {dt_s}')

@@ -20,14 +20,12 @@ import numpy as np
 
 from arm_control.config import ArmConfig
 from arm_control.model.kinematics import TwoLinkKinematics
-from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.model.world import ForbiddenSpace
 
 FRAME_ID = 'arm_base'
 PLANE_TOLERANCE_M = 0.001        # |z| allowed off the arm's plane
 # Clamped points land this far inside the annulus, so rounding cannot push them out again.
 CLAMP_MARGIN_M = 1e-6
-# Straight joint-space segments are checked for collisions at this step (0.1 deg).
-CHECK_STEP_RAD = 0.001745
 
 
 @dataclass(frozen=True)
@@ -205,7 +203,7 @@ class StraightLinePlanner:
         if not self.validator.kinematics.is_reachable(x, y):
             return DirectPlan(False, f'goal {describe_point(x, y)} is out of reach')
         reachable = [q for q in self.validator.free_configurations(x, y)
-                     if self.forbidden.segment_is_free(start, q, CHECK_STEP_RAD)]
+                     if self.forbidden.segment_is_free(start, q)]
         if not reachable:
             return DirectPlan(False, f'no straight joint-space move from {np.round(start, 3)} '
                                      f'rad reaches {describe_point(x, y)} through free space')

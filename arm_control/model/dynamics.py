@@ -1,12 +1,22 @@
-"""Coupled two-link arm dynamics driven by DC gearmotors (Pedersen, "Two jointed arm dynamics").
+"""The one model of the arm: coupled two-link dynamics driven by DC gearmotors (Pedersen,
+"Two jointed arm dynamics"; DESIGN.md §4).
 
 State x = [θa, θb, ωa, ωb] (shoulder, elbow relative to the upper arm; rad, rad/s);
-input u = [Va, Vb] (volts at each joint's motors).
+input u = [Va, Vb] (volts applied to each joint's motors).
 
     M(θ)θ̈ + C(θ, θ̇)θ̇ + τg(θ) = τ_motor(V, θ̇) − τ_friction(θ̇)
 
-The simulator integrates ``derivative``; the feedforward inverts the same model
-(``voltage_for``) and the Kalman filter predicts with it.
+with Pedersen's structure M00 = α + 2β·cos θb, M01 = γ + β·cos θb, M11 = γ,
+C(θ, θ̇)θ̇ = β·sin θb·[−θ̇b·θ̇a − (θ̇a + θ̇b)·θ̇b, θ̇a²],
+τg = [G_upper·cos θa + G_fore·cos(θa + θb), G_fore·cos(θa + θb)],
+τ_motor = (V − e·θ̇)/k per joint (``GearMotor``) and τ_friction = b·θ̇ + c·tanh(θ̇/ω_s).
+
+Everything that needs the arm's physics uses this class: the sim integrates ``derivative``,
+the Kalman filter predicts with it, the feedforward and the trajectory timing invert it
+(``voltage_for``, ``voltages``) and the benches check against it. Each equation has a scalar
+form (plain floats: the sim steps it a thousand times a second) and a batch form on arrays of
+shape (..., 2) or (..., 4) (the timing evaluates thousands of states at once); a test holds
+the two equal.
 """
 
 import math
@@ -21,13 +31,23 @@ COULOMB_SMOOTHING_RAD_S = 0.01
 
 
 def rk4(f, x, u, dt):
-    """One classical Runge-Kutta step of ẋ = f(x, u) with u held over the step."""
+    """One classical Runge-Kutta step of ẋ = f(x, u) with u held over the step, for a state
+    as a list of floats."""
     k1 = f(x, u)
     k2 = f([xi + 0.5 * dt * ki for xi, ki in zip(x, k1)], u)
     k3 = f([xi + 0.5 * dt * ki for xi, ki in zip(x, k2)], u)
     k4 = f([xi + dt * ki for xi, ki in zip(x, k3)], u)
     return [xi + dt / 6.0 * (a + 2.0 * b + 2.0 * c + d)
             for xi, a, b, c, d in zip(x, k1, k2, k3, k4)]
+
+
+def rk4_batch(f, x, u, dt):
+    """The same step for states as an array (..., 4)."""
+    k1 = f(x, u)
+    k2 = f(x + 0.5 * dt * k1, u)
+    k3 = f(x + 0.5 * dt * k2, u)
+    k4 = f(x + dt * k3, u)
+    return x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
 class ArmDynamics:
@@ -39,54 +59,55 @@ class ArmDynamics:
         ma, mb = upper.mass_kg, fore.mass_kg
         ra, rb = upper.com_from_joint_m, fore.com_from_joint_m
         la = upper.length_m
-        self.gravity = arm.gravity_mps2
-        # M00 = _m_base + 2·_m_coupling·cos θb, M01 = _m_elbow + _m_coupling·cos θb, M11 = _m_elbow
-        self._m_base = (ma * ra ** 2 + mb * (la ** 2 + rb ** 2)
-                        + upper.inertia_about_com_kgm2 + fore.inertia_about_com_kgm2)
-        self._m_coupling = mb * la * rb
-        self._m_elbow = mb * rb ** 2 + fore.inertia_about_com_kgm2
-        self._g_shoulder = self.gravity * (ma * ra + mb * la)
-        self._g_elbow = self.gravity * mb * rb
-        self.motors = tuple(
-            GearMotor.from_datasheet(arm.motor, joint.motor_count, joint.gear_ratio)
-            for joint in arm.joints)
-        self._viscous = tuple(j.viscous_friction_nm_s_per_rad for j in arm.joints)
-        self._coulomb = tuple(j.coulomb_friction_nm for j in arm.joints)
+        g = arm.gravity_mps2
+        self.alpha = (ma * ra ** 2 + mb * (la ** 2 + rb ** 2)
+                      + upper.inertia_about_com_kgm2 + fore.inertia_about_com_kgm2)
+        self.beta = mb * la * rb
+        self.gamma = mb * rb ** 2 + fore.inertia_about_com_kgm2
+        self.g_upper = g * (ma * ra + mb * la)
+        self.g_fore = g * mb * rb
+        self.motors = tuple(GearMotor.from_datasheet(joint.motor, joint.motor_count,
+                                                     joint.gear_ratio) for joint in arm.joints)
+        self.viscous = tuple(j.viscous_friction_nm_s_per_rad for j in arm.joints)
+        self.coulomb = tuple(j.coulomb_friction_nm for j in arm.joints)
+        self.volts_per_nm = tuple(m.volts_per_nm for m in self.motors)          # k
+        self.emf_v_per_rad_s = tuple(m.back_emf_v_per_rad_s for m in self.motors)  # e
+        self._k = np.array(self.volts_per_nm)
+        self._e = np.array(self.emf_v_per_rad_s)
+        self._b = np.array(self.viscous)
+        self._c = np.array(self.coulomb)
+
+    # ---------------------------------------------------------------- scalar forms
+
+    def _mass(self, elbow):
+        coupling = self.beta * math.cos(elbow)
+        return self.alpha + 2.0 * coupling, self.gamma + coupling, self.gamma
 
     def mass_matrix(self, q) -> np.ndarray:
         m00, m01, m11 = self._mass(q[1])
         return np.array([[m00, m01], [m01, m11]])
 
-    def _mass(self, elbow):
-        coupling = self._m_coupling * math.cos(elbow)
-        return self._m_base + 2.0 * coupling, self._m_elbow + coupling, self._m_elbow
-
     def coriolis_torque(self, q, qd) -> tuple[float, float]:
-        """C(θ, θ̇)θ̇ with C = h·[[−θ̇b, −(θ̇a + θ̇b)], [θ̇a, 0]], h = mb·La·rb·sin θb."""
-        h = self._m_coupling * math.sin(q[1])
+        """C(θ, θ̇)θ̇ with C = h·[[−θ̇b, −(θ̇a + θ̇b)], [θ̇a, 0]], h = β·sin θb."""
+        h = self.beta * math.sin(q[1])
         return (-h * qd[1] * qd[0] - h * (qd[0] + qd[1]) * qd[1], h * qd[0] * qd[0])
 
     def gravity_torque(self, q) -> tuple[float, float]:
-        """τg = [g cos θa (ma ra + mb La) + mb rb g cos(θa+θb), mb rb g cos(θa+θb)]."""
-        outer = self._g_elbow * math.cos(q[0] + q[1])
-        return (self._g_shoulder * math.cos(q[0]) + outer, outer)
+        """τg = [G_upper·cos θa + G_fore·cos(θa+θb), G_fore·cos(θa+θb)]."""
+        fore = self.g_fore * math.cos(q[0] + q[1])
+        return (self.g_upper * math.cos(q[0]) + fore, fore)
 
     def friction_torque(self, qd) -> tuple[float, float]:
         """Torque friction takes from each joint: b·ω + c·tanh(ω/ω_s) (elbow ω relative)."""
         return tuple(b * w + c * math.tanh(w / COULOMB_SMOOTHING_RAD_S)
-                     for b, c, w in zip(self._viscous, self._coulomb, qd))
+                     for b, c, w in zip(self.viscous, self.coulomb, qd))
 
     def motor_torque(self, qd, voltage) -> tuple[float, float]:
         return (self.motors[0].torque_nm(voltage[0], qd[0]),
                 self.motors[1].torque_nm(voltage[1], qd[1]))
 
-    def joint_torque(self, qd, voltage) -> tuple[float, float]:
-        """Net drive torque at each joint: motors less friction."""
-        motor, friction = self.motor_torque(qd, voltage), self.friction_torque(qd)
-        return motor[0] - friction[0], motor[1] - friction[1]
-
     def acceleration(self, q, qd, torque) -> tuple[float, float]:
-        """Forward dynamics: θ̈ = M⁻¹(τ − Cθ̇ − τg)."""
+        """Forward dynamics: θ̈ = M⁻¹(τ − Cθ̇ − τg), τ the net drive torque."""
         m00, m01, m11 = self._mass(q[1])
         cor, grav = self.coriolis_torque(q, qd), self.gravity_torque(q)
         r0 = torque[0] - cor[0] - grav[0]
@@ -109,9 +130,10 @@ class ArmDynamics:
                 self.motors[1].voltage_for(needed[1] + friction[1], qd[1]))
 
     def derivative(self, x, u) -> list[float]:
-        """f(x, u) = [θ̇, θ̈] with u the motor voltages."""
+        """f(x, u) = [θ̇, θ̈] with u the applied motor voltages."""
         qd = (x[2], x[3])
-        acc = self.acceleration(x, qd, self.joint_torque(qd, u))
+        motor, friction = self.motor_torque(qd, u), self.friction_torque(qd)
+        acc = self.acceleration(x, qd, (motor[0] - friction[0], motor[1] - friction[1]))
         return [x[2], x[3], acc[0], acc[1]]
 
     def derivative_with_torque(self, x, torque) -> list[float]:
@@ -123,6 +145,55 @@ class ArmDynamics:
         """Kinetic ½θ̇ᵀMθ̇ plus potential energy (zero at the shoulder's height)."""
         m00, m01, m11 = self._mass(x[1])
         kinetic = 0.5 * (m00 * x[2] ** 2 + 2.0 * m01 * x[2] * x[3] + m11 * x[3] ** 2)
-        potential = (self._g_shoulder * math.sin(x[0])
-                     + self._g_elbow * math.sin(x[0] + x[1]))
+        potential = self.g_upper * math.sin(x[0]) + self.g_fore * math.sin(x[0] + x[1])
         return kinetic + potential
+
+    def free_speed_rad_s(self, voltage: float) -> np.ndarray:
+        """Per joint, the speed at which ``voltage`` only balances the motors' back-EMF."""
+        return np.array([motor.free_speed_rad_s(voltage) for motor in self.motors])
+
+    # ---------------------------------------------------------------- batch forms
+
+    def mass_times(self, q, v) -> np.ndarray:
+        """M(q)·v for arrays q, v of shape (..., 2)."""
+        cos_b = np.cos(q[..., 1])
+        m00, m01 = self.alpha + 2.0 * self.beta * cos_b, self.gamma + self.beta * cos_b
+        return np.stack([m00 * v[..., 0] + m01 * v[..., 1],
+                         m01 * v[..., 0] + self.gamma * v[..., 1]], axis=-1)
+
+    def coriolis(self, q, qd) -> np.ndarray:
+        """C(q, q̇)q̇, (..., 2)."""
+        h = self.beta * np.sin(q[..., 1])
+        return np.stack([-h * qd[..., 1] * qd[..., 0] - h * (qd[..., 0] + qd[..., 1])
+                         * qd[..., 1], h * qd[..., 0] ** 2], axis=-1)
+
+    def gravity(self, q) -> np.ndarray:
+        """τg(q), (..., 2)."""
+        fore = self.g_fore * np.cos(q[..., 0] + q[..., 1])
+        return np.stack([self.g_upper * np.cos(q[..., 0]) + fore, fore], axis=-1)
+
+    def friction(self, qd) -> np.ndarray:
+        """b·q̇ + c·tanh(q̇/ω_s), (..., 2)."""
+        return self._b * qd + self._c * np.tanh(qd / COULOMB_SMOOTHING_RAD_S)
+
+    def voltages(self, q, qd, qdd) -> np.ndarray:
+        """``voltage_for`` on arrays (..., 2): V = k·(M q̈ + C q̇ + τg + τ_friction) + e·q̇."""
+        q, qd, qdd = (np.asarray(v, float) for v in (q, qd, qdd))
+        torque = self.mass_times(q, qdd) + self.coriolis(q, qd) + self.gravity(q) \
+            + self.friction(qd)
+        return self._k * torque + self._e * qd
+
+    def accelerations(self, x, u) -> np.ndarray:
+        """q̈ (..., 2) for states x (..., 4) and applied volts u (..., 2)."""
+        q, qd = x[..., :2], x[..., 2:]
+        drive = ((u - self._e * qd) / self._k - self.friction(qd)
+                 - self.coriolis(q, qd) - self.gravity(q))
+        cos_b = np.cos(q[..., 1])
+        m00, m01 = self.alpha + 2.0 * self.beta * cos_b, self.gamma + self.beta * cos_b
+        det = m00 * self.gamma - m01 * m01
+        return np.stack([(self.gamma * drive[..., 0] - m01 * drive[..., 1]) / det,
+                         (m00 * drive[..., 1] - m01 * drive[..., 0]) / det], axis=-1)
+
+    def derivatives(self, x, u) -> np.ndarray:
+        """f(x, u) for states (..., 4) and volts (..., 2): [q̇, q̈], (..., 4)."""
+        return np.concatenate([x[..., 2:], self.accelerations(x, u)], axis=-1)

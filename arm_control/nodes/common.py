@@ -14,8 +14,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 import yaml
 
-from arm_control.config import (default_parameter_file, parameter_descriptions,
-                                ParameterError, read_parameter_file)
+from arm_control.parameters import (default_parameter_file, parameter_descriptions,
+                                    ParameterError, read_parameter_file)
 
 # QoS named for its use.
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,

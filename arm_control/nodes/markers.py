@@ -18,9 +18,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from arm_control.config import ArmConfig, ParameterError
+from arm_control.config import ArmConfig
 from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, STATE_STREAM
 from arm_control.nodes.viewer import joint_positions, yaw_of
+from arm_control.parameters import ParameterError
 from arm_control.visual.markers import MarkerBuilder
 from arm_control.visual.viewer_model import ViewerModel
 

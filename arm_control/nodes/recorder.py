@@ -14,10 +14,10 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
-from arm_control.config import ParameterError
 from arm_control.nodes.common import COMMANDS, declare_parameters, finite, LATCHED, run, \
     STATE_STREAM
 from arm_control.nodes.viewer import joint_positions
+from arm_control.parameters import ParameterError
 from arm_control.visual.recording import Recording
 
 

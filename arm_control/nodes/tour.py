@@ -19,10 +19,11 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from arm_control.config import ArmConfig, ParameterError
+from arm_control.config import ArmConfig
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.nodes.common import (COMMANDS, controller_sees_planner, declare_parameters,
                                       LATCHED, run, STATE_STREAM)
+from arm_control.parameters import ParameterError
 
 FINISHED, REFUSED = 'holding', ('error', 'estopped', 'disabled')
 

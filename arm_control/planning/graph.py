@@ -30,7 +30,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.model.world import ForbiddenSpace
 
 # Neighbour steps (d_shoulder, d_elbow); DIRECTIONS[7 - k] is the opposite of DIRECTIONS[k].
 DIRECTIONS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))

@@ -17,7 +17,7 @@ import numpy as np
 
 from arm_control.config import ArmConfig, PlannerConfig
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
-from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.graph import ConfigurationGrid, segments_free
 
 # Lazily found blocked edges are cut and the search re-run at most this often per query.
@@ -91,7 +91,7 @@ class Planner:
         self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
         self.forbidden = ForbiddenSpace(arm)
         self.grid = ConfigurationGrid(self.forbidden, config.grid_resolution_rad,
-                                      config.check_step_rad)
+                                      arm.world.check_step_rad)
 
     # Public
 
@@ -163,7 +163,7 @@ class Planner:
         """``ForbiddenSpace.segment_is_free`` at ``check_step_rad``, after a pass at a
         ``coarse_factor`` times coarser step that rejects most blocked segments for a
         fraction of the cost (a forbidden sample is forbidden at any step)."""
-        step = self.config.check_step_rad
+        step = self.forbidden.check_step_rad
         coarse = self.forbidden.segment_is_free(q_from, q_to, coarse_factor * step)
         return coarse and self.forbidden.segment_is_free(q_from, q_to, step)
 
@@ -253,7 +253,7 @@ class Planner:
         at ``MIDDLE_FACTOR`` times that step. With none in sight, the next
         grid step (checked when the grid path was found) is kept.
         """
-        step = self.config.check_step_rad
+        step = self.forbidden.check_step_rad
         last = len(path) - 1
         moves = np.diff(path, axis=0)
         corners = np.flatnonzero(np.any(np.abs(np.diff(moves, axis=0)) > 1e-12, axis=1)) + 1

@@ -21,7 +21,7 @@ import sys
 
 import numpy as np
 
-from arm_control import config
+from arm_control import config, parameters
 from arm_control.control.arm_controller import ArmController
 from arm_control.model.plant import ArmPlant
 from arm_control.planning.planner import Planner
@@ -127,7 +127,7 @@ def main(argv=None) -> int:
     parser.add_argument('--recording', action='store_true',
                         help='also write <name>_run.npz, for plot_run')
     args = parser.parse_args(argv)
-    params_file = args.params or config.default_parameter_file()
+    params_file = args.params or parameters.default_parameter_file()
     run = closed_loop_run(params_file, args.goals, seed=args.seed)
     args.output.mkdir(parents=True, exist_ok=True)
     arm = config.load('sim', params_file)[0]
@@ -137,7 +137,7 @@ def main(argv=None) -> int:
         recording.save(args.output / f'{args.name}_run.npz')
     plot_run(recording, args.output / f'{args.name}_run.png',
              title=f'{Path(params_file).name}: {" → ".join(g[0] for g in run.goals)}',
-             max_voltage=arm.max_voltage)
+             max_voltage=arm.battery.nominal_voltage)
     print(f'{"goal":<14} {"x (m)":>6} {"y (m)":>6} {"reached at (s)":>15}')
     for name, x, y, reached_s in run.goals:
         print(f'{name:<14} {x:6.2f} {y:6.2f} {reached_s:15.2f}')

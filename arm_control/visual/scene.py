@@ -21,7 +21,7 @@ import numpy as np
 
 from arm_control.config import ArmConfig
 from arm_control.model.kinematics import TwoLinkKinematics, wrap_angle
-from arm_control.planning.cspace import ForbiddenSpace
+from arm_control.model.world import ForbiddenSpace
 
 # The arm takes its state's colour: (word in the state's name, colour), first match wins.
 STATE_COLOURS = (

@@ -14,7 +14,8 @@ import math
 import sys
 from xml.etree import ElementTree
 
-from arm_control.config import ArmConfig, default_parameter_file, read_parameter_file
+from arm_control.config import ArmConfig
+from arm_control.parameters import read_parameter_files
 
 LINK_WIDTH_M = 0.08          # drawn size of the links across the plane (visual only)
 LINK_DEPTH_M = 0.05
@@ -62,9 +63,9 @@ def _revolute(robot, joint, parent, child, x_m):
 
 def joint_limits(arm: ArmConfig, joint) -> dict[str, float]:
     """lower/upper (rad), effort = n·G·τ_stall (N·m), velocity = ω_free / G (rad/s)."""
-    free_speed_rad_s = arm.motor.free_speed_rpm * 2.0 * math.pi / 60.0
+    free_speed_rad_s = joint.motor.free_speed_rpm * 2.0 * math.pi / 60.0
     return {'lower': joint.min_angle_rad, 'upper': joint.max_angle_rad,
-            'effort': joint.motor_count * joint.gear_ratio * arm.motor.stall_torque_nm,
+            'effort': joint.motor_count * joint.gear_ratio * joint.motor.stall_torque_nm,
             'velocity': free_speed_rad_s / joint.gear_ratio}
 
 
@@ -113,8 +114,7 @@ def arm_urdf(arm: ArmConfig, name: str = 'arm_control_arm') -> str:
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    path = argv[0] if argv else default_parameter_file()
-    sys.stdout.write(arm_urdf(ArmConfig.from_parameters(read_parameter_file(path, 'urdf'))))
+    sys.stdout.write(arm_urdf(ArmConfig.from_parameters(read_parameter_files(argv, 'urdf'))))
     return 0
 
 

@@ -1,4 +1,4 @@
-"""Forbidden space: the configurations the arm may never take.
+"""The world the arm lives in: the configurations it may never take (forbidden space).
 
 A configuration q = (shoulder, elbow) is forbidden when a joint is past its limit, the elbow
 is folded tighter than ``min_elbow_fold_rad``, or any point of either link -- checked along
@@ -53,6 +53,7 @@ class ForbiddenSpace:
             for r in arm.world.regions]
         self.limits = np.array([[j.min_angle_rad, j.max_angle_rad] for j in arm.joints])
         self.max_elbow_fold_rad = math.pi - arm.world.min_elbow_fold_rad
+        self.check_step_rad = arm.world.check_step_rad
 
     def _links(self, q):
         shoulder, elbow = q[..., 0], q[..., 1]
@@ -104,14 +105,16 @@ class ForbiddenSpace:
                     return f'the {link_name} enters the forbidden region "{name}"'
         return None
 
-    def segment_is_free(self, q_from, q_to, step_rad: float) -> bool:
-        """Whether the straight joint-space segment is free, checked every ``step_rad``."""
+    def segment_is_free(self, q_from, q_to, step_rad: float | None = None) -> bool:
+        """Whether the straight joint-space segment is free, checked every ``step_rad``
+        (default: the world's ``check_step_rad``)."""
+        step_rad = step_rad or self.check_step_rad
         q_from, q_to = np.asarray(q_from, float), np.asarray(q_to, float)
         count = max(2, int(math.ceil(np.max(np.abs(q_to - q_from)) / step_rad)) + 1)
         samples = q_from + np.linspace(0.0, 1.0, count)[:, None] * (q_to - q_from)
         return bool(np.all(self.is_free(samples)))
 
-    def path_is_free(self, path, step_rad: float) -> bool:
+    def path_is_free(self, path, step_rad: float | None = None) -> bool:
         path = np.asarray(path, float)
         return all(self.segment_is_free(a, b, step_rad) for a, b in zip(path[:-1], path[1:]))
 
@@ -122,8 +125,7 @@ class ForbiddenSpace:
         clear = np.all(self._free(q[..., None, :] + margin_rad * _SQUARE), axis=-1)
         return bool(clear) if clear.ndim == 0 else clear
 
-    def nearest_clear(self, q, margin_rad: float, reach_rad: float,
-                      step_rad: float = 0.001745) -> np.ndarray | None:
+    def nearest_clear(self, q, margin_rad: float, reach_rad: float) -> np.ndarray | None:
         """The configuration nearest q (joint-space distance, in steps of ``margin_rad``/2
         and 5 deg of direction) that is ``clear_by`` the margin and reached by a straight
         segment that, once free, stays free; None within ``reach_rad``."""
@@ -135,7 +137,7 @@ class ForbiddenSpace:
         distances = np.repeat(radii, len(angles))
         for index in np.flatnonzero(self.clear_by(candidates, margin_rad)):
             target = candidates[index]
-            count = max(2, int(math.ceil(distances[index] / step_rad)) + 1)
+            count = max(2, int(math.ceil(distances[index] / self.check_step_rad)) + 1)
             free = self._free(q + np.linspace(0.0, 1.0, count)[:, None] * (target - q))
             if np.all(free[np.argmax(free):]):
                 return target
