@@ -9,6 +9,7 @@ import pytest
 from arm_control import config
 from arm_control.config import Rectangle
 from arm_control.control import trajectory as trajectory_module
+from arm_control.control.feedforward import PeriodFeedforward
 from arm_control.control.trajectory import (BlendedPath, time_optimal_trajectory,
                                             Trajectory, trajectory_voltage,
                                             TrajectoryError, TrajectoryLimits)
@@ -429,7 +430,7 @@ def test_the_period_feedforward_keeps_the_held_arm_on_the_trajectory(setup):
     arm, dynamics, forbidden, limits = setup
     waypoints = PATHS['up to the front']
     trajectory = time_optimal_trajectory(waypoints, dynamics, forbidden, limits)
-    feedforward = trajectory_module.PeriodFeedforward(dynamics, 0.02, arm.battery.nominal_voltage)
+    feedforward = PeriodFeedforward(dynamics, 0.02, arm.battery.nominal_voltage)
     references = []
 
     def deadbeat(t):

@@ -97,8 +97,11 @@ class ArmEstimator:
         enc = _finite_pair(encoder_rad, 'encoder_rad')
         self._initialise(pot, np.zeros(2), self._vel_var, enc)
 
-    def predict(self, voltage, dt_s: float) -> None:
-        """Advance the estimate by ``dt_s`` with ``voltage`` [Va, Vb] held (as applied)."""
+    def predict(self, voltage, dt_s: float, supply=None, bus_voltage: float = math.nan) -> None:
+        """Advance the estimate by ``dt_s`` with the command ``voltage`` [Va, Vb] held; with
+        a ``PowerSupply``, what its motor controllers apply at ``bus_voltage`` (within the
+        current limits, capped at the bus) at each substep's speed, else ``voltage`` itself
+        within the battery's nominal volts."""
         self._require_initialised()
         u = _finite_pair(voltage, 'voltage')
         limit = self.arm.battery.nominal_voltage
@@ -107,15 +110,22 @@ class ArmEstimator:
             raise ValueError(f'dt_s must be finite and non-negative, got {dt_s}')
         if dt_s == 0.0:
             return
+        bus = bus_voltage if math.isfinite(bus_voltage) else limit
+
+        def derivative(x, command):
+            """f(x, u) with u what the motor controllers apply for the command."""
+            applied = command if supply is None else supply.applied_at(command, x[2:], bus)
+            return self.dynamics.derivative(x, applied)
         joint = [float(v) for v in self._kf.x[:4]]
         u_pair = (float(u[0]), float(u[1]))
         substeps = max(1, math.ceil(dt_s / MAX_SUBSTEP_S - 1e-9))
         step_s = dt_s / substeps
         transition = np.eye(6)
-        transition[:4, :4] = self._rk4_transition(joint, u_pair, step_s, substeps)
+        transition[:4, :4] = self._rk4_transition(derivative, joint, u_pair, step_s, substeps)
         self._kf.F = transition
         self._kf.Q = self._process_noise(dt_s)
-        self._kf.predict(u=(u_pair, step_s, substeps))      # x by the model, P = F P Fᵀ + Q
+        # x by the model, P = F P Fᵀ + Q
+        self._kf.predict(u=(derivative, u_pair, step_s, substeps))
         self._kf.P = _symmetric(self._kf.P)
 
     def update(self, potentiometer_rad, velocity_rad_s, encoder_rad) -> None:
@@ -239,19 +249,18 @@ class ArmEstimator:
 
     def _integrate(self, x, u):
         """The EKF's mean prediction: RK4 substeps of f, clamped at the stops like the plant."""
-        voltage, step_s, substeps = u
+        derivative, voltage, step_s, substeps = u
         state = [float(v) for v in x[:4]]
         for _ in range(substeps):
-            state = self._hard_stops(rk4(self.dynamics.derivative, state, voltage, step_s))
+            state = self._hard_stops(rk4(derivative, state, voltage, step_s))
         return np.concatenate([state, x[_ZERO]])
 
-    def _rk4_transition(self, joint, voltage, step_s, substeps) -> np.ndarray:
+    def _rk4_transition(self, f, joint, voltage, step_s, substeps) -> np.ndarray:
         """F = ∂x⁺/∂x of the RK4 substeps for ẋ ≈ A x, A = ∂f/∂x at the step's start.
 
         One substep maps by Φ = I + Ah + (Ah)²/2 + (Ah)³/6 + (Ah)⁴/24 (RK4 on a linear
         system), so F = Φⁿ; plain numpy, cheaper and steadier under load than scipy's expm.
         """
-        f = self.dynamics.derivative
         f0 = f(joint, voltage)
         columns = []
         for i in range(4):

@@ -12,17 +12,18 @@ are free, the one that gets there soonest -- by the planner's cost or the trajec
 duration when one is given, by the least joint travel otherwise.
 """
 
+from collections import deque
 from dataclasses import dataclass, field
 import math
 from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-from arm_control.config import ArmConfig
+from arm_control.config import ArmConfig, FRAME_ID
+from arm_control.control.events import quote
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 
-FRAME_ID = 'arm_base'
 PLANE_TOLERANCE_M = 0.001        # |z| allowed off the arm's plane
 # Clamped points land this far inside the annulus, so rounding cannot push them out again.
 CLAMP_MARGIN_M = 1e-6
@@ -44,10 +45,12 @@ class Goal:
 
 @dataclass(frozen=True)
 class GoalCheck:
-    """The verdict on a requested goal: the goal, or the reason it was rejected."""
+    """The verdict on a requested goal: the goal, or the reason it was rejected (a sentence,
+    and a few words for counting rejections by kind)."""
 
     goal: Optional[Goal]
     reason: str = ''
+    category: str = ''
 
     @property
     def ok(self) -> bool:
@@ -94,12 +97,14 @@ def clamp_to_annulus(x: float, y: float, inner_m: float, outer_m: float) -> tupl
 class GoalValidator:
     """Checks goals against the arm's reach and forbidden space; lists the free branches."""
 
-    def __init__(self, arm: ArmConfig, clamp_unreachable_goals: bool = False,
-                 forbidden: Optional[ForbiddenSpace] = None):
+    def __init__(self, arm: ArmConfig, clamp_unreachable_goals: bool = False):
         self.arm = arm
         self.clamp_unreachable_goals = clamp_unreachable_goals
         self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
-        self.forbidden = forbidden or ForbiddenSpace(arm)
+        self.forbidden = ForbiddenSpace(arm)
+        # A goal's configuration keeps the clearance: holding there, the arm's overshoot
+        # and sensor noise stay out of forbidden space.
+        self.clear_space = ForbiddenSpace(arm, arm.world.clearance_rad)
 
     def check(self, x: float, y: float, z: float = 0.0, frame_id: str = '',
               label: Optional[str] = None) -> GoalCheck:
@@ -107,30 +112,34 @@ class GoalValidator:
         values = (x, y, z)
         if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
             return GoalCheck(None, f'goal ({x}, {y}, {z}) has a coordinate that is not a '
-                                   'finite number')
+                                   'finite number', 'not finite')
         where = label or describe_point(x, y)
         if frame_id not in ('', FRAME_ID):
-            return GoalCheck(None, f"goal {where} is in frame '{frame_id}': goals must be in "
-                                   f"'{FRAME_ID}' (or leave frame_id empty); there is no TF "
-                                   'here to transform it')
+            return GoalCheck(None, f'goal {where} is in frame {quote(frame_id)}: goals must be '
+                                   f"in '{FRAME_ID}' (or leave frame_id empty); there is no TF "
+                                   'here to transform it', 'wrong frame')
         if abs(z) > PLANE_TOLERANCE_M:
             return GoalCheck(None, f'goal {where} has z = {z:.4f} m: the arm moves in the '
-                                   f'plane z = 0 (within {PLANE_TOLERANCE_M * 1000:.0f} mm)')
+                                   f'plane z = 0 (within {PLANE_TOLERANCE_M * 1000:.0f} mm)',
+                             'off the plane')
         inner, outer = self.kinematics.reach_m
         note = ''
         if not self.kinematics.is_reachable(x, y):
             radius = math.hypot(x, y)
             if not self.clamp_unreachable_goals:
                 return GoalCheck(None, f'goal {where} is {radius:.3f} m from the shoulder: out '
-                                       f'of reach, the arm reaches {inner:.3f} to {outer:.3f} m')
+                                       f'of reach, the arm reaches {inner:.3f} to {outer:.3f} m',
+                                 'out of reach')
             x, y = clamp_to_annulus(x, y, inner, outer)
             note = (f'clamped from {radius:.3f} m onto the reachable annulus at '
                     f'{describe_point(x, y)}')
         branches = self.branches(x, y)
         if not any(branch.free for branch in branches):
             why = '; '.join(f'{b.name}: {b.forbidden_reason}' for b in branches)
-            return GoalCheck(None, f'goal {where} is in forbidden space on every elbow branch '
-                                   f'({why})')
+            return GoalCheck(None, f'goal {where} is in forbidden space, or within the '
+                                   f'{math.degrees(self.clear_space.margin_rad):.1f} deg '
+                                   f'clearance of it, on every elbow branch ({why})',
+                             'forbidden')
         return GoalCheck(Goal(float(x), float(y), label or describe_point(x, y), note))
 
     def branches(self, x: float, y: float) -> list[Branch]:
@@ -150,7 +159,7 @@ class GoalValidator:
                 q = (float(shoulder), float(elbow))
             else:
                 q = (float(in_range[0]), float(in_range[1]))
-                reason = self.forbidden.why_forbidden(np.array(q))
+                reason = self.clear_space.why_forbidden(np.array(q))
             if any(np.allclose(q, other.q_rad, atol=1e-9) for other in out):
                 continue                    # on the annulus's edge both branches coincide
             out.append(Branch(name, q, reason))
@@ -214,3 +223,61 @@ class StraightLinePlanner:
         if best is None:
             return DirectPlan(False, f'no timed straight move reaches {describe_point(x, y)}')
         return DirectPlan(True, '', np.array([start, best]), joint_travel_rad(start, best))
+
+
+class GoalQueue:
+    """The goal being worked on and the goals waiting, in the order they will be visited;
+    ``version`` changes whenever they do (the node republishes the queue then)."""
+
+    def __init__(self, size: int):
+        self.size = size
+        self.waiting: deque[Goal] = deque()
+        self.current: Optional[Goal] = None
+        self.version = 0
+
+    def __len__(self) -> int:
+        return len(self.waiting) + (self.current is not None)
+
+    @property
+    def full(self) -> bool:
+        return len(self.waiting) >= self.size
+
+    def append(self, goal: Goal) -> None:
+        self.waiting.append(goal)
+        self.version += 1
+
+    def start_next(self) -> Goal:
+        self.current = self.waiting.popleft()
+        self.version += 1
+        return self.current
+
+    def start(self, goal: Goal) -> None:
+        self.current = goal
+        self.version += 1
+
+    def finish(self) -> Optional[Goal]:
+        """The current goal is done (reached or failed): returns it."""
+        goal, self.current = self.current, None
+        self.version += 1
+        return goal
+
+    def put_back(self) -> None:
+        """Interrupted (the sensors stopped, the arm was moved): the current goal goes first
+        again."""
+        if self.current is not None:
+            self.waiting.appendleft(self.current)
+            self.current = None
+            self.version += 1
+
+    def clear(self) -> int:
+        """Drop every goal; returns how many there were."""
+        dropped = len(self)
+        if dropped:
+            self.version += 1
+        self.waiting.clear()
+        self.current = None
+        return dropped
+
+    def pending(self) -> list[Goal]:
+        """The current goal (first) and the waiting ones."""
+        return ([self.current] if self.current is not None else []) + list(self.waiting)

@@ -112,6 +112,11 @@ class TrajectoryLimits:
         return (self.max_voltage, braking)
 
     @classmethod
+    def from_arm(cls, arm: ArmConfig) -> 'TrajectoryLimits':
+        """The arm's own limits: the battery both ways, no caps, no reserves."""
+        return cls((1e3, 1e3), (1e5, 1e5), arm.battery.nominal_voltage)
+
+    @classmethod
     def from_config(cls, arm: ArmConfig, controller: ControllerConfig) -> 'TrajectoryLimits':
         controller.check_against(arm)
         volts = arm.battery.nominal_voltage
@@ -1238,87 +1243,6 @@ def _accelerations(terms, constants, x, u):
     det = m00 * terms.gamma - m01 * m01
     return np.column_stack([(terms.gamma * drive[:, 0] - m01 * drive[:, 1]) / det,
                             (m00 * drive[:, 1] - m01 * drive[:, 0]) / det])
-
-
-class PeriodFeedforward:
-    """Feedforward for a voltage held over each control period, and the state to track.
-
-    A 50 Hz loop holds each command for 20 ms, while a time-optimal trajectory switches
-    from driving to braking, and stops, at any instant: driven by the period's average
-    voltage the arm ends the period off the trajectory (up to a degree on a short hop) and
-    the PID has to catch it. Instead a model of the arm, the reference, is driven by the
-    feedforward itself, and each period's voltage is the first of two -- one per period
-    ahead, per joint -- that would put the reference exactly on the trajectory, position and
-    velocity, two periods from now (four conditions, four volts: deadbeat; one Newton step
-    from the Simpson average of the trajectory's voltage over each period, the Jacobian by
-    finite differences). The PID tracks the reference, a motion the arm can follow exactly.
-    The reference restarts on the setpoint when it is more than ``restart_rad`` away (the
-    setpoint jumped) or the loop paused for more than two periods.
-    """
-
-    def __init__(self, dynamics: ArmDynamics, period_s: float, max_voltage: float,
-                 substep_s: float = 0.01, restart_rad: float = 0.05):
-        self.terms, self.constants = _ArmTerms(dynamics), _model_constants(dynamics)
-        self.period_s = float(period_s)
-        self.max_voltage = float(max_voltage)
-        self.substep_s = float(substep_s)
-        self.restart_rad = float(restart_rad)
-        self.state = None               # the reference [θa, θb, ωa, ωb] at time_s
-        self.time_s = -math.inf
-        self.voltage = np.zeros(2)
-
-    def reset(self) -> None:
-        self.state = None
-
-    def _simulate(self, x, volts, duration_s):
-        """States (P, 4) after holding each of ``volts`` (P, k, 2) for ``duration_s`` in
-        turn, by RK4 on steps of at most ``substep_s``."""
-        steps = max(1, math.ceil(duration_s / self.substep_s - 1e-9))
-        h = duration_s / steps
-        x = np.array(x, float)
-        for k in range(volts.shape[1]):
-            u = volts[:, k]
-
-            def f(state):
-                return np.hstack([state[:, 2:],
-                                  _accelerations(self.terms, self.constants, state, u)])
-            for _ in range(steps):
-                k1 = f(x)
-                k2 = f(x + 0.5 * h * k1)
-                k3 = f(x + 0.5 * h * k2)
-                k4 = f(x + h * k3)
-                x = x + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        return x
-
-    def step(self, now_s: float, setpoint) -> np.ndarray:
-        """The voltage to hold from ``now_s``; ``setpoint(t)`` -> (q, q̇, q̈) of the
-        trajectory. Updates ``state``, the reference at ``now_s``."""
-        period = self.period_s
-        q_sp, qd_sp, _ = setpoint(now_s)
-        here = np.concatenate([q_sp, qd_sp])
-        if self.state is not None and 0.0 < now_s - self.time_s <= 2.5 * period:
-            self.state = self._simulate(self.state[None], self.voltage[None, None],
-                                        now_s - self.time_s)[0]
-        if (self.state is None or not 0.0 <= now_s - self.time_s <= 2.5 * period
-                or np.max(np.abs(self.state[:2] - q_sp)) > self.restart_rad):
-            self.state = here
-        self.time_s = now_s
-        samples = [setpoint(now_s + fraction * period) for fraction in (0, 0.5, 1, 1.5, 2)]
-        volts = _voltages(self.terms, self.constants, *(np.array(v) for v in zip(*samples)))
-        guess = np.concatenate([(volts[0] + 4 * volts[1] + volts[2]) / 6,
-                                (volts[2] + 4 * volts[3] + volts[4]) / 6])
-        target = np.concatenate(samples[-1][:2])
-        delta = 0.5
-        trials = np.tile(guess, (5, 1))
-        trials[1:] += delta * np.eye(4)
-        ends = self._simulate(np.tile(self.state, (5, 1)), trials.reshape(5, 2, 2), period)
-        jacobian = (ends[1:] - ends[0]).T / delta
-        try:
-            guess = guess - np.linalg.solve(jacobian, ends[0] - target)
-        except np.linalg.LinAlgError:
-            pass
-        self.voltage = np.clip(guess[:2], -self.max_voltage, self.max_voltage)
-        return self.voltage.copy()
 
 
 def sure_acceleration_rad_s2(dynamics: ArmDynamics, forbidden, voltage: float,

@@ -1,8 +1,10 @@
 """What every node shell shares: parameters from the one file, QoS by use, and main()."""
 
+import functools
 import math
 import os
 from pathlib import Path
+import statistics
 import sys
 from typing import Optional
 
@@ -76,8 +78,30 @@ def controller_sees_planner(message: DiagnosticArray) -> Optional[bool]:
     return None
 
 
-def finite(values) -> bool:
-    return all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)
+def guarded(callback):
+    """A callback that logs what it raises instead of stopping the node: no message, however
+    malformed, may take a node down (a service still answers, unsuccessfully)."""
+    @functools.wraps(callback)
+    def wrapper(self, *args):
+        try:
+            return callback(self, *args)
+        except Exception as error:
+            self.bad_inputs += 1
+            self.get_logger().error(f'{callback.__name__} failed on its input: {error!r}',
+                                    throttle_duration_sec=1.0)
+            if len(args) == 2 and hasattr(args[1], 'success'):
+                args[1].success, args[1].message = False, f'failed: {error!r}'
+                return args[1]
+            return None
+    return wrapper
+
+
+def loop_statistics(periods_s, compute_s) -> dict:
+    """Mean and worst of a loop's periods, median and worst of its compute times (s)."""
+    return {'mean': statistics.fmean(periods_s) if periods_s else math.nan,
+            'worst': max(periods_s, default=math.nan),
+            'compute median': statistics.median(compute_s) if compute_s else math.nan,
+            'compute worst': max(compute_s, default=math.nan)}
 
 
 def status(node, level, message: str, values: dict) -> DiagnosticStatus:

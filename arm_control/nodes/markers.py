@@ -19,8 +19,8 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from arm_control.config import ArmConfig
+from arm_control.nodes import messages
 from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, STATE_STREAM
-from arm_control.nodes.viewer import joint_positions, yaw_of
 from arm_control.parameters import ParameterError
 from arm_control.visual.markers import MarkerBuilder
 from arm_control.visual.viewer_model import ViewerModel
@@ -54,7 +54,7 @@ class MarkersNode(Node):
 
     def on_joint_states(self, msg: JointState) -> None:
         now = time.monotonic()
-        why = self.model.on_joint_state(joint_positions(msg), now)
+        why = self.model.on_joint_state((messages.joint_pair(msg) or []), now)
         self._refused(why)
         if why is None and now - self.last_publish_s >= self.min_period_s:
             self.last_publish_s = now
@@ -62,15 +62,13 @@ class MarkersNode(Node):
                                                         self.get_clock().now().to_msg()))
 
     def on_setpoint(self, msg: JointState) -> None:
-        self._refused(self.model.on_setpoint(joint_positions(msg)))
+        self._refused(self.model.on_setpoint((messages.joint_pair(msg) or [])))
 
     def on_state(self, msg: String) -> None:
         self.model.on_state(msg.data)
 
     def on_path(self, msg: Path) -> None:
-        self._refused(self.model.on_path(
-            [(p.pose.position.x, p.pose.position.y, yaw_of(p.pose.orientation))
-             for p in msg.poses]))
+        self._refused(self.model.on_path(messages.poses_of(msg)))
 
     def on_goal(self, msg: PointStamped) -> None:
         self.model.on_goal(msg.point.x, msg.point.y, msg.point.z, msg.header.frame_id)

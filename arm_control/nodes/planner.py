@@ -24,19 +24,21 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import PoseStamped, Quaternion
+from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid, Path
 from nav_msgs.srv import GetPlan
 import numpy as np
 from rclpy.node import Node
 
-from arm_control.config import ArmConfig, PlannerConfig
+from arm_control.config import ArmConfig, FRAME_ID, PlannerConfig
+from arm_control.control.events import quote
+from arm_control.control.goals import PLANE_TOLERANCE_M
+from arm_control.control.plans import BranchRanking
+from arm_control.nodes import messages
 from arm_control.nodes.common import declare_parameters, LATCHED, run, status
 from arm_control.planning.planner import Planner, poses_from_waypoints
 
-FRAME = 'arm_base'
 CSPACE_FRAME = 'cspace'
-PLANAR_TOLERANCE_M = 0.001        # a goal's z must be 0 within this (DESIGN.md §2)
 POSE_TOLERANCE_M = 0.001          # a start pose must be a pose of this arm within this
 
 
@@ -60,10 +62,6 @@ def yaw_from_quaternion(q) -> float:
     return 2.0 * math.atan2(z, w)
 
 
-def quaternion_from_yaw(yaw: float) -> Quaternion:
-    return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
-
-
 class PlannerNode(Node):
 
     def __init__(self):
@@ -73,6 +71,7 @@ class PlannerNode(Node):
         self.config = PlannerConfig.from_parameters(params)
         began = time.monotonic()
         self.planner = Planner(self.arm, self.config)
+        self.ranking = BranchRanking(self.arm)
         self.build_s = time.monotonic() - began
         self.kinematics = self.planner.kinematics
         self.counts = {'plans': 0, 'no plan': 0, 'rejected requests': 0}
@@ -96,7 +95,7 @@ class PlannerNode(Node):
 
     def on_plan_path(self, request, response):
         response.plan = Path()
-        response.plan.header.frame_id = FRAME
+        response.plan.header.frame_id = FRAME_ID
         response.plan.header.stamp = self.get_clock().now().to_msg()
         try:
             return self.answer(request, response)
@@ -119,7 +118,7 @@ class PlannerNode(Node):
             self.get_logger().warning(f'{self.last_message}; answering with an empty path',
                                       throttle_duration_sec=1.0)
             return response
-        plan = self.planner.plan(start_q, goal_xy)
+        plan = self.plan(start_q, goal_xy)
         self.last_latency_s = time.monotonic() - began
         goal_text = f'({goal_xy[0]:.3f}, {goal_xy[1]:.3f}) m'
         if not plan.ok:
@@ -144,10 +143,18 @@ class PlannerNode(Node):
         self.get_logger().info(f'{self.last_message} ({1000 * self.last_latency_s:.1f} ms)')
         return response
 
+    def plan(self, start_q, goal_xy):
+        """The elbow branch that gets there soonest, as the controller would choose it
+        (``BranchRanking``); the planner's own choice for a goal without a clear branch."""
+        plans = [self.planner.plan_to_configuration(start_q, q)
+                 for q in self.ranking.validator.free_configurations(*goal_xy)]
+        fastest = self.ranking.fastest_branch([plan for plan in plans if plan.ok])
+        return fastest if fastest is not None else self.planner.plan(start_q, goal_xy)
+
     def check_frame(self, header, what: str) -> None:
-        if header.frame_id not in ('', FRAME):
-            raise RequestError(f"{what} is in frame '{header.frame_id}', expected '{FRAME}' "
-                               '(there is no TF here to transform it)')
+        if header.frame_id not in ('', FRAME_ID):
+            raise RequestError(f'{what} is in frame {quote(header.frame_id)}, expected '
+                               f"'{FRAME_ID}' (there is no TF here to transform it)")
 
     def start_configuration(self, start: PoseStamped) -> np.ndarray:
         """The joint configuration whose tool pose is ``start``, in the joints' travel."""
@@ -174,7 +181,7 @@ class PlannerNode(Node):
         x, y, z = position.x, position.y, position.z
         if not all(math.isfinite(v) for v in (x, y, z)):
             raise RequestError(f'goal position ({x}, {y}, {z}) is not finite')
-        if abs(z) > PLANAR_TOLERANCE_M:
+        if abs(z) > PLANE_TOLERANCE_M:
             raise RequestError(f'goal z = {z:.4f} m: the arm moves in the plane z = 0')
         return x, y
 
@@ -182,7 +189,7 @@ class PlannerNode(Node):
         x, y, yaw = pose
         msg = PoseStamped(header=header)
         msg.pose.position.x, msg.pose.position.y = x, y
-        msg.pose.orientation = quaternion_from_yaw(yaw)
+        msg.pose.orientation = messages.quaternion_from_yaw(yaw)
         return msg
 
     # cspace_map and diagnostics

@@ -14,9 +14,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
-from arm_control.nodes.common import COMMANDS, declare_parameters, finite, LATCHED, run, \
-    STATE_STREAM
-from arm_control.nodes.viewer import joint_positions
+from arm_control.nodes import messages
+from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, STATE_STREAM
 from arm_control.parameters import ParameterError
 from arm_control.visual.recording import Recording
 
@@ -54,18 +53,16 @@ class RecorderNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def on_joints(self, stream: str, msg: JointState) -> None:
-        position = joint_positions(msg)
-        if len(position) < 2 or not finite(position[:2]):
+        position = messages.joint_pair(msg) or []
+        if len(position) < 2 or not messages.finite(position[:2]):
             self.get_logger().warning(f'{stream}: position {list(msg.position)} not recorded: '
                                       'expected 2 finite angles', throttle_duration_sec=2.0)
             return
-        velocity = list(msg.velocity)
-        if len(msg.name) == len(velocity) and all(n in msg.name for n in ('shoulder', 'elbow')):
-            velocity = [velocity[list(msg.name).index(n)] for n in ('shoulder', 'elbow')]
+        velocity = messages.joint_pair(msg, 'velocity') or []
         self.recording.add_joints(stream, self._time_s(msg.header), position, velocity)
 
     def on_voltage(self, msg: Float64MultiArray) -> None:
-        if len(msg.data) != 2 or not finite(list(msg.data)):
+        if len(msg.data) != 2 or not messages.finite(list(msg.data)):
             self.get_logger().warning(f'voltage_command {list(msg.data)} not recorded: '
                                       'expected [shoulder_V, elbow_V]', throttle_duration_sec=2.0)
             return

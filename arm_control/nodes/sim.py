@@ -1,27 +1,34 @@
-"""The ``sim`` node: motor voltages in, the arm's sensors out.
+"""The ``sim`` node: voltage commands in, the arm's sensors and its electrical state out.
 
 Subscribes ``voltage_command`` (Float64MultiArray [shoulder_V, elbow_V]) and ``~/set_state``
-(JointState: put the arm at a position and velocity); publishes ``joint_states``
-(potentiometers), ``motor_encoders``, ``~/ground_truth`` and ``/diagnostics``; serves
-``~/reset`` (Trigger: back to ``initial_position`` at rest).
+(JointState by joint name: put the arm at a position and velocity); publishes
+``joint_states`` (potentiometers), ``motor_encoders``, ``~/ground_truth``, ``battery_state``
+(BatteryState: bus volts, supply current negative while discharging), ``motor_currents``
+([shoulder_A, elbow_A], one motor of each joint), ``~/events`` (brownouts) and
+``/diagnostics``; serves ``~/reset`` (Trigger: back to ``initial_position`` at rest).
+
+A command acts from when it arrives: the physics is brought up to that instant with the
+previous one first. No command for ``command_timeout_s`` -> 0 V, as a disabled robot. The
+sim's own stalls (a loaded machine) are not the robot's: the time they cover is simulated
+with the command the robot had, up to ``MAX_CATCH_UP_S``.
 """
 
 import math
 import sys
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, Header
+from sensor_msgs.msg import BatteryState, JointState
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 from arm_control.config import ArmConfig, JOINT_NAMES, SimConfig
 from arm_control.model.plant import ArmPlant
-from arm_control.nodes.common import (COMMANDS, declare_parameters, finite, run,
+from arm_control.nodes import messages
+from arm_control.nodes.common import (COMMANDS, declare_parameters, loop_statistics, run,
                                       STATE_STREAM, status)
 
-# After a stall (a paused process, a loaded machine) the physics catches up at most this far.
+# After a stall the physics catches up at most this far; beyond, the arm waits.
 MAX_CATCH_UP_S = 0.1
 
 
@@ -37,57 +44,80 @@ class SimNode(Node):
                               self.config.physics_step_s, seed)
         if self.config.rest_until_first_command:
             self.plant.rest()
-        self.last_command_time = -math.inf
-        self.commands_rejected = 0
-        self.commands_rejected_reported = 0
+        self.clock_origin_s = self.now_s()        # plant time 0
+        self.last_command_s = -math.inf
         self.timed_out = True
+        self.commands_rejected = self.commands_rejected_said = 0
+        self.brownouts_said = 0
+        self.brownouts_last_second = []
+        self.periods_s, self.last_step_s = [], self.now_s()
 
         self.joint_states_pub = self.create_publisher(JointState, 'joint_states', STATE_STREAM)
         self.encoders_pub = self.create_publisher(JointState, 'motor_encoders', STATE_STREAM)
         self.truth_pub = self.create_publisher(JointState, '~/ground_truth', STATE_STREAM)
+        self.battery_pub = self.create_publisher(BatteryState, 'battery_state', STATE_STREAM)
+        self.currents_pub = self.create_publisher(Float64MultiArray, 'motor_currents',
+                                                  STATE_STREAM)
+        self.events_pub = self.create_publisher(String, '~/events', 100)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(Float64MultiArray, 'voltage_command', self.on_voltage, COMMANDS)
         self.create_subscription(JointState, '~/set_state', self.on_set_state, COMMANDS)
         self.create_service(Trigger, '~/reset', self.on_reset)
-
         self.period_s = 1.0 / self.config.publish_rate_hz
-        self.last_step = time.monotonic()
-        self.tick_periods_s = []
         self.create_timer(self.period_s, self.step)
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
             f'simulating the arm at {self.config.publish_rate_hz:g} Hz from '
             f'[{self.config.initial_position[0]:.3f}, {self.config.initial_position[1]:.3f}] rad')
 
+    def now_s(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def catch_up(self, now_s: float) -> None:
+        """Bring the physics up to ``now_s`` with the command it has."""
+        behind_s = now_s - self.clock_origin_s - self.plant.time_s
+        if behind_s > MAX_CATCH_UP_S:                 # a long stall: the arm waited
+            self.clock_origin_s += behind_s - MAX_CATCH_UP_S
+            behind_s = MAX_CATCH_UP_S
+        steps = math.floor(behind_s / self.plant.physics_step_s + 1e-9)
+        self.plant.advance(steps * self.plant.physics_step_s)
+
     def on_voltage(self, msg: Float64MultiArray) -> None:
         voltage = list(msg.data)
-        if len(voltage) != 2 or not finite(voltage):
+        if len(voltage) != 2 or not messages.finite(voltage):
             self.commands_rejected += 1
             self.get_logger().warning(
-                f'rejected voltage_command {voltage}: expected [shoulder_V, elbow_V], finite; '
-                'keeping the last good command', throttle_duration_sec=1.0)
+                f'rejected a voltage_command of {len(voltage)} values: expected '
+                '[shoulder_V, elbow_V], finite; keeping the last good command',
+                throttle_duration_sec=1.0)
             return
+        now = self.now_s()
+        self.catch_up(now)
         self.plant.set_voltage(voltage)
+        self.last_command_s = now
         if self.plant.resting:
             self.plant.release()
             self.get_logger().info('first voltage command: the arm leaves its rest')
-        self.last_command_time = time.monotonic()
         if self.timed_out:
             self.timed_out = False
             self.get_logger().info('voltage commands arriving')
 
     def on_set_state(self, msg: JointState) -> None:
-        position = list(msg.position)
-        velocity = list(msg.velocity) or [0.0, 0.0]
-        if len(position) != 2 or len(velocity) != 2 or not finite(position + velocity):
+        position = messages.joint_pair(msg, 'position')
+        velocity = messages.joint_pair(msg, 'velocity') if msg.velocity else [0.0, 0.0]
+        if position is None or velocity is None or not messages.finite(position + velocity):
             self.get_logger().warning(
-                f'rejected set_state: expected 2 finite positions (and optionally 2 velocities),'
-                f' got position={position} velocity={velocity}', throttle_duration_sec=1.0)
+                f'rejected set_state: expected finite positions (and optionally velocities) '
+                f'of {list(JOINT_NAMES)}, by name or in that order; got names '
+                f'{[n[:20] for n in msg.name[:4]]}, {len(msg.position)} positions',
+                throttle_duration_sec=1.0)
             return
+        self.catch_up(self.now_s())
         self.plant.reset(position, velocity)
         self.get_logger().info(f'arm set to position {position} rad, velocity {velocity} rad/s')
 
     def on_reset(self, request, response):
+        self.catch_up(self.now_s())
         self.plant.reset(self.config.initial_position)
         self.plant.set_voltage((0.0, 0.0))
         if self.config.rest_until_first_command:
@@ -98,61 +128,83 @@ class SimNode(Node):
         return response
 
     def step(self) -> None:
-        now = time.monotonic()
-        elapsed = min(now - self.last_step, MAX_CATCH_UP_S)
-        self.tick_periods_s.append(now - self.last_step)
-        self.last_step = now
-        if now - self.last_command_time > self.config.command_timeout_s:
+        now = self.now_s()
+        stalled = now - self.last_step_s > 2.0 * self.period_s     # the sim's, not the robot's
+        self.periods_s.append(now - self.last_step_s)
+        self.last_step_s = now
+        timeout_s = self.config.command_timeout_s
+        if not stalled and now - self.last_command_s > timeout_s:
             if not self.timed_out:
                 self.timed_out = True
                 self.get_logger().warning(
-                    f'no voltage_command for {self.config.command_timeout_s:g} s: applying 0 V')
+                    f'no voltage_command for {timeout_s:g} s: applying 0 V')
+                self.catch_up(self.last_command_s + timeout_s)
             self.plant.set_voltage((0.0, 0.0))
-        self.plant.advance(elapsed)
+        self.catch_up(now)
+        self.say_brownouts()
         self.publish(self.plant.read())
+
+    def say_brownouts(self) -> None:
+        for brownout in self.plant.brownouts[self.brownouts_said:]:
+            text = (f'brownout: the bus fell below {self.arm.battery.brownout_voltage:g} V for '
+                    f'{brownout.duration_s:.3f} s (outputs at 0 V for {brownout.disabled_s:.3f} '
+                    f's of it), from t = {brownout.start_s:.3f} s')
+            self.events_pub.publish(String(data=text))
+            self.get_logger().error(text)
+            self.brownouts_last_second.append(brownout)
+        self.brownouts_said = len(self.plant.brownouts)
 
     def publish(self, reading) -> None:
         stamp = self.get_clock().now().to_msg()
-
-        def joint_state(position, velocity, effort=()):
-            return JointState(header=_header(stamp), name=list(JOINT_NAMES),
-                              position=[float(p) for p in position],
-                              velocity=[float(v) for v in velocity],
-                              effort=[float(e) for e in effort])
-
-        self.joint_states_pub.publish(joint_state(
-            reading.potentiometer_rad, reading.velocity_rad_s, reading.effort_nm))
-        self.encoders_pub.publish(joint_state(reading.encoder_rad,
-                                              reading.encoder_velocity_rad_s))
+        self.joint_states_pub.publish(messages.joint_state(
+            stamp, reading.potentiometer_rad, reading.velocity_rad_s, reading.effort_nm))
+        self.encoders_pub.publish(messages.joint_state(stamp, reading.encoder_rad,
+                                                       reading.encoder_velocity_rad_s))
         truth = reading.true_state
-        self.truth_pub.publish(joint_state(truth[:2], truth[2:], reading.effort_nm))
+        self.truth_pub.publish(messages.joint_state(stamp, truth[:2], truth[2:],
+                                                    reading.effort_nm))
+        battery = BatteryState(header=messages.header(stamp, ''), present=True,
+                               voltage=float(reading.bus_voltage),
+                               current=-float(reading.supply_current_a))
+        battery.power_supply_status = (BatteryState.POWER_SUPPLY_STATUS_CHARGING
+                                       if reading.supply_current_a < 0.0 else
+                                       BatteryState.POWER_SUPPLY_STATUS_DISCHARGING)
+        for name in ('temperature', 'charge', 'capacity', 'design_capacity', 'percentage'):
+            setattr(battery, name, math.nan)
+        self.battery_pub.publish(battery)
+        self.currents_pub.publish(Float64MultiArray(
+            data=[float(i) for i in reading.motor_current_a]))
 
     def publish_diagnostics(self) -> None:
-        periods, self.tick_periods_s = self.tick_periods_s, []
-        worst = max(periods, default=math.nan)
-        mean = sum(periods) / len(periods) if periods else math.nan
-        level = DiagnosticStatus.OK
-        message = 'running'
-        rejected_now = self.commands_rejected - self.commands_rejected_reported
-        self.commands_rejected_reported = self.commands_rejected
+        periods, self.periods_s = self.periods_s, []
+        stats = loop_statistics(periods, [])
+        brownouts, self.brownouts_last_second = self.brownouts_last_second, []
+        level, message = DiagnosticStatus.OK, 'running'
+        rejected_now = self.commands_rejected - self.commands_rejected_said
+        self.commands_rejected_said = self.commands_rejected
         if rejected_now:
             level, message = DiagnosticStatus.WARN, f'{rejected_now} malformed voltage commands'
         if self.timed_out:
             level, message = DiagnosticStatus.WARN, 'no voltage commands: applying 0 V'
-        if worst > 3 * self.period_s:
-            level, message = DiagnosticStatus.WARN, f'loop stalled for {worst:.3f} s'
+        if stats['worst'] > 3 * self.period_s:
+            level, message = DiagnosticStatus.WARN, f'loop stalled for {stats["worst"]:.3f} s'
+        if brownouts or self.plant.browned_out_since_s is not None:
+            longest = max((b.duration_s for b in brownouts), default=0.0)
+            level, message = DiagnosticStatus.ERROR, (
+                f'brownout: {len(brownouts)} in the last second, the longest {longest:.3f} s'
+                + ('; one going on' if self.plant.browned_out_since_s is not None else ''))
+        power = self.plant.power
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()
         diagnostic.status = [status(self, level, message, {
-            'mean period (s)': f'{mean:.4f}', 'worst period (s)': f'{worst:.4f}',
+            'mean period (s)': f'{stats["mean"]:.4f}', 'worst period (s)': f'{stats["worst"]:.4f}',
             'commands rejected': self.commands_rejected,
-            'applied voltage (V)': list(self.plant.voltage),
+            'commanded voltage (V)': list(self.plant.command),
+            'applied voltage (V)': [round(v, 3) for v in power.applied_v],
+            'bus voltage (V)': f'{power.bus_voltage:.2f}',
+            'brownouts': len(self.plant.brownouts),
         })]
         self.diagnostics_pub.publish(diagnostic)
-
-
-def _header(stamp):
-    return Header(stamp=stamp, frame_id='')
 
 
 def main(args=None):

@@ -19,7 +19,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from arm_control.config import ArmConfig
+from arm_control.config import ArmConfig, FRAME_ID
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.nodes.common import (COMMANDS, controller_sees_planner, declare_parameters,
                                       LATCHED, run, STATE_STREAM)
@@ -113,7 +113,7 @@ class TourNode(Node):
                 return
         name, (x, y) = self.goals[self.index]
         msg = PointStamped()
-        msg.header.frame_id = 'arm_base'
+        msg.header.frame_id = FRAME_ID
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.point.x, msg.point.y = float(x), float(y)
         self.left_start_state, self.arrived_after_s = False, None

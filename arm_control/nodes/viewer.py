@@ -7,7 +7,6 @@ and (when the controller publishes it) ``controller/setpoint``; draws them with
 no display, it writes the picture to ``png_path`` ``png_rate_hz`` times a second instead.
 """
 
-import math
 import os
 import sys
 import time
@@ -18,31 +17,15 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from arm_control.config import ArmConfig, JOINT_NAMES
+from arm_control.config import ArmConfig, FRAME_ID
+from arm_control.nodes import messages
 from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, STATE_STREAM
 from arm_control.visual.scene import cspace_from_occupancy, SceneView, workspace_extent
 from arm_control.visual.viewer_model import ViewerConfig, ViewerModel
 
-FRAME = 'arm_base'
-
 
 def have_display() -> bool:
     return bool(os.environ.get('DISPLAY') or os.environ.get('WAYLAND_DISPLAY'))
-
-
-def joint_positions(msg: JointState):
-    """(shoulder, elbow) from a JointState, by name when it has names, else in order."""
-    names = list(msg.name)
-    position = list(msg.position)
-    if names and all(name in names for name in JOINT_NAMES) and len(names) == len(position):
-        return [position[names.index(name)] for name in JOINT_NAMES]
-    return position
-
-
-def yaw_of(orientation) -> float:
-    """Rotation about z of a quaternion: atan2(2(wz + xy), 1 − 2(y² + z²))."""
-    q = orientation
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 class ViewerNode(Node):
@@ -108,18 +91,17 @@ class ViewerNode(Node):
             self.get_logger().warning(why, throttle_duration_sec=2.0)
 
     def on_joint_states(self, msg: JointState) -> None:
-        self._refused(self.model.on_joint_state(joint_positions(msg), time.monotonic()))
+        self._refused(self.model.on_joint_state(messages.joint_pair(msg) or [],
+                                                time.monotonic()))
 
     def on_setpoint(self, msg: JointState) -> None:
-        self._refused(self.model.on_setpoint(joint_positions(msg)))
+        self._refused(self.model.on_setpoint((messages.joint_pair(msg) or [])))
 
     def on_state(self, msg: String) -> None:
         self.model.on_state(msg.data)
 
     def on_path(self, msg: Path) -> None:
-        poses = [(p.pose.position.x, p.pose.position.y, yaw_of(p.pose.orientation))
-                 for p in msg.poses]
-        self._refused(self.model.on_path(poses))
+        self._refused(self.model.on_path(messages.poses_of(msg)))
 
     def on_goal(self, msg: PointStamped) -> None:
         why = self.model.on_goal(msg.point.x, msg.point.y, msg.point.z, msg.header.frame_id)
@@ -151,7 +133,7 @@ class ViewerNode(Node):
             return
         msg = PointStamped()
         msg.header.stamp = self.get_clock().now().to_msg()
-        msg.header.frame_id = FRAME
+        msg.header.frame_id = FRAME_ID
         msg.point.x, msg.point.y = point
         self.goal_pub.publish(msg)
         self.get_logger().info(f'goal_point ({point[0]:.3f}, {point[1]:.3f}) m published')

@@ -12,13 +12,12 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from arm_control.config import ArmConfig
+from arm_control.config import ArmConfig, FRAME_ID
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.visual.scene import (densify, FORBIDDEN_COLOUR, GOAL_COLOUR, PATH_COLOUR,
                                       REACH_COLOUR, Scene, SETPOINT_COLOUR, state_colour,
                                       workspace_extent)
 
-FRAME = 'arm_base'
 LINK_WIDTH_M = 0.06
 REGION_THICKNESS_M = 0.02
 CIRCLE_SEGMENTS = 120
@@ -36,7 +35,7 @@ def point(x: float, y: float) -> Point:
 class MarkerBuilder:
     """Builds the MarkerArray of one arm; ``build(scene, stamp)`` for each frame."""
 
-    def __init__(self, arm: ArmConfig, frame_id: str = FRAME):
+    def __init__(self, arm: ArmConfig, frame_id: str = FRAME_ID):
         self.arm = arm
         self.frame_id = frame_id
         self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)

@@ -12,7 +12,8 @@ import math
 import re
 from typing import Any, Mapping
 
-from arm_control.config import ArmConfig
+from arm_control.config import ArmConfig, FRAME_ID
+from arm_control.control.events import quote
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.parameters import ParameterError
@@ -20,7 +21,7 @@ from arm_control.visual.scene import path_configurations, reachable_free, Scene
 
 MAX_GOALS = 256                 # goals shown at most; a flood beyond this is not drawn
 STALE_AFTER_S = 0.5             # joint states older than this are called out on the picture
-GOAL_FRAMES = ('', 'arm_base')
+GOAL_FRAMES = ('', FRAME_ID)
 GOAL_Z_TOLERANCE_M = 1e-3
 
 
@@ -99,7 +100,7 @@ class ViewerModel:
         if not all(_finite(v) for v in (x, y, z)):
             return f'goal ({x}, {y}, {z}) is not finite'
         if frame_id not in GOAL_FRAMES:
-            return f"goal in frame '{frame_id}': only arm_base is understood"
+            return f'goal in frame {quote(frame_id)}: only arm_base is understood'
         if abs(z) > GOAL_Z_TOLERANCE_M:
             return f'goal z = {z:.3f} m: the arm moves in the plane z = 0'
         if not reachable_free(self.space, x, y):

@@ -1,12 +1,11 @@
 """A real closed-loop run without ROS, recorded, plotted and drawn: the README's pictures.
 
 The controller core, the planner and the simulated arm run in one process, in simulated
-time, at the controller's loop rate: each period the plant's sensor reading goes to
-``ArmController.step`` and the voltage it returns drives ``ArmPlant``. Every period is kept
-as a ``Sample`` (for ``plots.plot_run``) and as a ``Scene`` (for the viewer's picture).
+time, at the controller's loop rate (``control.closed_loop.ClosedLoop``). Every period is
+kept as a ``Sample`` (for ``plots.plot_run``) and as a ``Scene`` (for the viewer's picture).
 
-    python -m arm_control.visual.demo docs/                          # the default arm
-    python -m arm_control.visual.demo docs/ --params config/frc_robot.yaml --name frc_robot
+    python scripts/readme_pictures.py docs/                          # the default arm
+    python scripts/readme_pictures.py docs/ --params config/frc_robot.yaml --name frc_robot
 
 writes ``<name>_viewer.png`` (the viewer mid-way through the longest move, path and goals
 shown) and ``<name>_run.png`` (angles and setpoints, tracking error, voltage, states) --
@@ -21,9 +20,8 @@ import sys
 
 import numpy as np
 
-from arm_control import config, parameters
-from arm_control.control.arm_controller import ArmController
-from arm_control.model.plant import ArmPlant
+from arm_control import config
+from arm_control.control.closed_loop import ClosedLoop
 from arm_control.planning.planner import Planner
 from arm_control.visual.plots import plot_run
 from arm_control.visual.recording import Recording, Sample
@@ -38,7 +36,12 @@ class PlannerTap:
         self.last_path_rad: tuple = ()
 
     def plan(self, start_q, goal_xy):
-        plan = self.planner.plan(start_q, goal_xy)
+        return self._keep(self.planner.plan(start_q, goal_xy))
+
+    def plan_to_configuration(self, start_q, goal_q):
+        return self._keep(self.planner.plan_to_configuration(start_q, goal_q))
+
+    def _keep(self, plan):
         if plan.ok:
             self.last_path_rad = tuple(map(tuple, np.asarray(plan.waypoints_rad)))
         return plan
@@ -52,36 +55,29 @@ class Run:
     events: list = field(default_factory=list)          # the controller's Event list
 
 
-def closed_loop_run(params_file, goal_names=None, duration_s: float = 30.0,
+def closed_loop_run(params_files=(), goal_names=None, duration_s: float = 30.0,
                     seed: int = 0) -> Run:
     """Send the presets ``goal_names`` (default: every preset) at t = 0, queued, and run
     until all are reached and 1 s more, or ``duration_s``."""
-    arm, sim_config = config.load('sim', params_file)
-    controller_config = config.load('controller', params_file)[1]
-    planner_config = config.load('planner', params_file)[1]
-    planner = PlannerTap(Planner(arm, planner_config))
-    plant = ArmPlant(arm, sim_config.initial_position, sim_config.physics_step_s, seed)
-    core = ArmController(arm, controller_config, planner)
-    period_s = 1.0 / controller_config.loop_rate_hz
+    arm, sim_config = config.load('sim', *params_files)
+    controller_config = config.load('controller', *params_files)[1]
+    planner = PlannerTap(Planner(arm, config.load('planner', *params_files)[1]))
+    loop = ClosedLoop(arm, controller_config, planner, sim_config.initial_position, seed,
+                      sim_config.physics_step_s)
     presets = {name: (x, y) for name, x, y in arm.presets}
     names = list(goal_names or presets)
     run = Run()
     for name in names:
-        ok, message = core.submit_preset(0.0, name, preempt=False)
+        ok, message = loop.core.submit_preset(0.0, name, preempt=False)
         if not ok:
             raise ValueError(message)
         run.goals.append([name, *presets[name], math.nan])
-    end_s = duration_s
-    while plant.time_s < end_s:
-        now = plant.time_s
-        reading = plant.read()
-        reached_before = core.counts['reached']
-        voltage = core.step(now, reading)
-        if core.counts['reached'] > reached_before:
-            run.goals[reached_before][3] = now
-            if core.counts['reached'] == len(names):
-                end_s = min(end_s, now + 1.0)
-        plant.set_voltage(voltage)
+
+    def keep(loop, reading, voltage):
+        core, now = loop.core, loop.now
+        reached = core.goals.counts['reached']
+        if reached and math.isnan(run.goals[reached - 1][3]):
+            run.goals[reached - 1][3] = now
         state = str(core.state)
         setpoint = tuple(float(v) for v in core.setpoint[0])
         run.samples.append(Sample(
@@ -90,14 +86,16 @@ def closed_loop_run(params_file, goal_names=None, duration_s: float = 30.0,
             voltage=tuple(float(v) for v in voltage), state=state,
             measured_rad_s=tuple(reading.velocity_rad_s),
             true_rad_s=tuple(reading.true_state[2:])))
-        waiting = ([core.current_goal] if core.current_goal is not None else []) \
-            + list(core.queue)
         run.scenes.append(Scene(
             joint_rad=tuple(float(v) for v in reading.true_state[:2]), state=state,
-            path_rad=planner.last_path_rad, goals_xy=tuple(g.xy for g in waiting),
+            path_rad=planner.last_path_rad, goals_xy=tuple(g.xy for g in core.pending_goals()),
             setpoint_rad=setpoint))
-        plant.advance(period_s)
-    run.events = list(core.events)
+
+    loop.observers.append(keep)
+    all_reached = loop.run(duration_s, lambda: loop.core.goals.counts['reached'] == len(names))
+    if all_reached:
+        loop.run(1.0)
+    run.events = list(loop.core.events.history)
     return run
 
 
@@ -119,31 +117,31 @@ def telling_frame(run: Run) -> Scene:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('output', type=Path, help='folder for the pictures')
-    parser.add_argument('--params', type=Path, default=None,
-                        help='parameter file (default: the installed config/arm.yaml)')
+    parser.add_argument('--params', type=Path, action='append', default=[],
+                        help='parameter file layered over config/arm.yaml (repeatable)')
     parser.add_argument('--name', default='default', help='prefix of the files written')
     parser.add_argument('--goals', nargs='*', default=None, help='presets, in order')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--recording', action='store_true',
                         help='also write <name>_run.npz, for plot_run')
     args = parser.parse_args(argv)
-    params_file = args.params or parameters.default_parameter_file()
-    run = closed_loop_run(params_file, args.goals, seed=args.seed)
+    run = closed_loop_run(args.params, args.goals, seed=args.seed)
     args.output.mkdir(parents=True, exist_ok=True)
-    arm = config.load('sim', params_file)[0]
+    arm = config.load('sim', *args.params)[0]
     SceneView(arm).render_png(telling_frame(run), args.output / f'{args.name}_viewer.png')
     recording = Recording.from_samples(run.samples)
     if args.recording:
         recording.save(args.output / f'{args.name}_run.npz')
     plot_run(recording, args.output / f'{args.name}_run.png',
-             title=f'{Path(params_file).name}: {" → ".join(g[0] for g in run.goals)}',
+             title=f'{Path((args.params or ["arm.yaml"])[-1]).name}: '
+                   f'{" → ".join(g[0] for g in run.goals)}',
              max_voltage=arm.battery.nominal_voltage)
     print(f'{"goal":<14} {"x (m)":>6} {"y (m)":>6} {"reached at (s)":>15}')
     for name, x, y, reached_s in run.goals:
         print(f'{name:<14} {x:6.2f} {y:6.2f} {reached_s:15.2f}')
     for event in run.events:
         if event.level != 'info':
-            print(f'{event.time_s:7.2f} s {event.level}: {event.message}')
+            print(f'{event.time_s:7.2f} s {event.level}: {event}')
     print(f'wrote {args.name}_viewer.png, {args.name}_run.png'
           f'{f", {args.name}_run.npz" if args.recording else ""} in {args.output}')
     return 0

@@ -1,0 +1,357 @@
+"""The controller's pure core: goals in, one voltage per control period out. No ROS here.
+
+Each period the node (or a test, or a benchmark) calls ``step(now_s, reading)``; the core
+
+1. estimates the state (``sensing.Sensing``: the Kalman filter over the readings);
+2. supervises: stale sensors, joint limits, the arm moved under it, then the goals
+   (``goal_runner.GoalRunner``: the planner's deadline, arrival, dwell, the next goal);
+   ``state_machine.py`` holds every allowed transition;
+3. commands V = feedforward + PID, clamped to the bus voltage: the feedforward is the held
+   voltage that keeps a model of the arm on the trajectory (``PeriodFeedforward``), the PID
+   tracks that model's state on the estimate;
+4. enforces the safety rules (``safety.py``): control that has failed stops at 0 V; an
+   e-stop by service brakes to rest along the path and holds there (``estop_holds_arm``:
+   with no brake, 0 V drops a 45 kg arm); taking control back after 0 V returns the arm to
+   where it was held, or lifts it clear of forbidden space.
+
+Planning is asynchronous: starting a goal emits a ``PlanRequest`` (``take_plan_requests``)
+and the answer comes back as a ``TimedPlan`` through ``on_timed_plan`` -- timed elsewhere
+(``plans.PlanTimer``, in the node's worker process). With a ``planner`` object given (tests,
+benchmarks in simulated time) the core plans and times in its own step. No plan within
+``planner_timeout_s``: the goal fails with the reason -- never a blind move.
+"""
+
+import math
+from typing import Optional
+
+import numpy as np
+
+from arm_control.config import ArmConfig, ControllerConfig
+from arm_control.control.driver import DriverMode
+from arm_control.control.events import EventKind as Kind, EventLog, quote
+from arm_control.control.feedforward import PeriodFeedforward
+from arm_control.control.goal_runner import GoalRunner
+from arm_control.control.motions import Setpoints
+from arm_control.control.pid import ArmPid
+from arm_control.control.plans import PlanRequest, PlanTimer, TimedPlan
+from arm_control.control.safety import SafetyRules
+from arm_control.control.sensing import Sensing
+from arm_control.control.state_machine import (ArmState as S, COMMANDING, StateMachine,
+                                               STOPPED, Trigger as T)
+from arm_control.control.trajectory import sure_acceleration_rad_s2, TrajectoryLimits
+from arm_control.model.kinematics import TwoLinkKinematics
+
+
+class ArmController:
+    """Estimation, supervision, control and safety; the goals run by a ``GoalRunner``. One
+    ``step`` per control period returns the voltage to apply [Va, Vb]."""
+
+    def __init__(self, arm: ArmConfig, config: ControllerConfig, planner=None):
+        self.arm, self.config, self.planner = arm, config, planner
+        self.period_s = config.period_s
+        self.plan_timer = PlanTimer(arm, config)
+        dynamics, self.forbidden = self.plan_timer.dynamics, self.plan_timer.forbidden
+        self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+        # Braking, holds and driver mode count on what the motors surely give in any pose:
+        # no more than the free speed, and the least favourable free pose's acceleration.
+        volts = min(TrajectoryLimits.from_config(arm, config).budget)
+        self.max_velocity = np.minimum(config.max_velocity_rad_s,
+                                       dynamics.free_speed_rad_s(volts))
+        self.max_acceleration = np.minimum(
+            config.max_acceleration_rad_s2,
+            sure_acceleration_rad_s2(dynamics, self.forbidden, volts))
+        self.sensing = Sensing(arm, config.process_noise_rad_s2)
+        self.pid = ArmPid.from_config(config)
+        self.feedforward = PeriodFeedforward(dynamics, self.period_s,
+                                             arm.battery.nominal_voltage)
+        self.safety = SafetyRules(arm, config, self.forbidden, self.max_acceleration,
+                                  self.max_velocity)
+        self.setpoints = Setpoints(DriverMode(
+            self.kinematics, self.forbidden, self.max_velocity, self.max_acceleration,
+            self.period_s, config.driver_max_speed_mps, config.driver_command_timeout_s),
+            self.max_acceleration)
+        self.machine, self.events = StateMachine(), EventLog()
+        self.goals = GoalRunner(arm, config, self.machine, self.events, self.setpoints)
+        self.planner_available: Optional[bool] = None    # as the node's client sees it
+        self.last_step_s: Optional[float] = None
+        self.commanded_q: Optional[np.ndarray] = None    # the setpoint last commanded
+        self.estop_holding = False                        # e-stopped, holding (not at 0 V)
+        self.voltage = self.feedforward_v = self.feedback_v = np.zeros(2)
+        self.saturated = (0, 0)
+        self.setpoint = (np.zeros(2), np.zeros(2), np.zeros(2))
+        self.tracking_error_rad = np.zeros(2)
+        self.estop_error, self.estops = '', 0
+
+    @property
+    def state(self) -> S:
+        return self.machine.state
+
+    @property
+    def estimate(self) -> Optional[np.ndarray]:
+        """[θa, θb, ωa, ωb], or None before the first reading."""
+        return self.sensing.state if self.sensing.started else None
+
+    @property
+    def last_error(self) -> str:
+        return self.estop_error or self.goals.last_error
+
+    def _rest_q(self) -> np.ndarray:
+        return self.sensing.state[:2] if self.sensing.started else np.zeros(2)
+
+    # ------------------------------------------------------------------ commands
+
+    def submit_goal(self, now_s: float, x: float, y: float, z: float = 0.0,
+                    frame_id: str = '', label: Optional[str] = None,
+                    preempt: bool = False) -> tuple[bool, str]:
+        """Queue a goal point, or with ``preempt`` go there now (``GoalRunner.submit``)."""
+        return self.goals.submit(now_s, x, y, z, frame_id, label, preempt, self._rest_q())
+
+    def submit_preset(self, now_s: float, name: str, preempt: bool = True) -> tuple[bool, str]:
+        """A named goal, as a driver's button: by default it replaces the queue and motion."""
+        return self.goals.submit_preset(now_s, name, preempt, self._rest_q())
+
+    def driver_command(self, now_s: float, vx_mps: float, vy_mps: float,
+                       frame_id: str = '') -> tuple[bool, str]:
+        """End-effector velocity (m/s, arm_base) from a driver; takes over from goals."""
+        if not (math.isfinite(vx_mps) and math.isfinite(vy_mps)):
+            return self.goals.reject(now_s, f'driver command ({vx_mps}, {vy_mps}) rejected: '
+                                            'not finite', 'not finite')
+        if frame_id not in ('', 'arm_base'):
+            return self.goals.reject(now_s, f'driver command rejected: frame {quote(frame_id)}'
+                                            ", expected 'arm_base'", 'wrong frame')
+        if self.state != S.DRIVER:
+            if not self.machine.can(T.DRIVER_COMMAND):
+                return self.goals.reject(now_s, 'driver command ignored in state '
+                                                f"'{self.state}'", str(self.state))
+            q, qd, _ = self._reference(now_s)
+            dropped = self.goals.drop()
+            self.machine.fire(T.DRIVER_COMMAND)
+            self.setpoints.drive(now_s, q, qd)
+            self._say(now_s, Kind.DRIVER, 'info', 'driver velocity mode' +
+                      (f': {dropped} goals dropped' if dropped else ''))
+        self.setpoints.driver.command(now_s, vx_mps, vy_mps)
+        return True, 'driver command accepted'
+
+    def cancel(self, now_s: float) -> tuple[bool, str]:
+        """Clear the queue and the current goal; brake to rest along the path and hold."""
+        if self.state in COMMANDING:
+            self.setpoints.brake(now_s)
+        dropped = self.goals.drop()
+        if self.machine.can(T.CANCEL):
+            self.machine.fire(T.CANCEL)
+        return self._say(now_s, Kind.CANCELLED, 'info',
+                         f'cancelled: {dropped} goals dropped; holding')
+
+    def estop(self, now_s: float, reason: str = 'e-stop requested',
+              cut_power: bool = False) -> tuple[bool, str]:
+        """Stopped until ``reset``, the queue cleared: braked to rest along the path and held
+        there (``estop_holds_arm``, and the arm under control), else -- ``cut_power``, or
+        e-stopped again while held -- 0 V. ``cut_power``: control itself failed."""
+        hold = self.config.estop_holds_arm and not cut_power and self.state in COMMANDING
+        if self.state == S.ESTOPPED:
+            if not self.estop_holding:
+                return True, 'already e-stopped: 0 V until reset'
+        else:
+            if hold:
+                self.setpoints.brake(now_s)
+            self.goals.drop()
+            self.machine.fire(T.ESTOP)
+            self.estops += 1
+        self.estop_holding = hold
+        if not hold:
+            self.voltage = np.zeros(2)
+            self.pid.reset()
+        self.estop_error = f'E-STOP: {reason}'
+        action = ('braking to rest and holding there until reset (e-stop again: 0 V)' if hold
+                  else '0 V until reset')
+        kind = Kind.CONTROL_FAILED if cut_power else Kind.ESTOP
+        return self._say(now_s, kind, 'error', f'E-STOP: {reason}; {action}')
+
+    def reset(self, now_s: float) -> tuple[bool, str]:
+        """Clear an e-stop or an error; a held arm keeps its hold, one at 0 V is taken back."""
+        if not self.machine.can(T.RESET):
+            return False, f"nothing to reset in state '{self.state}'"
+        previous, holding = self.state, self.estop_holding or self.state == S.ERROR
+        self.machine.fire(T.RESET)
+        self.estop_holding, self.estop_error, self.goals.last_error = False, '', ''
+        what = 'holding where it was held' if holding else self._resume(now_s)
+        return self._say(now_s, Kind.RESET, 'info', f'reset from {previous}: {what}')
+
+    def enable(self, now_s: float, enabled: bool) -> tuple[bool, str]:
+        """Enable (take the arm back) or disable (0 V, goals dropped)."""
+        if enabled:
+            if self.state != S.DISABLED:
+                return True, f"already enabled (state '{self.state}')"
+            self.machine.fire(T.ENABLE)
+            return self._say(now_s, Kind.ENABLED, 'info', f'enabled: {self._resume(now_s)}')
+        if self.state == S.DISABLED:
+            return True, 'already disabled'
+        if not self.machine.can(T.DISABLE):
+            return False, f"cannot disable in state '{self.state}': reset first"
+        self.goals.drop()
+        self.machine.fire(T.DISABLE)
+        self.voltage = np.zeros(2)
+        self.pid.reset()
+        return self._say(now_s, Kind.DISABLED, 'info', 'disabled: 0 V, goals dropped')
+
+    # ------------------------------------------------------------------ planning hand-off
+
+    def take_plan_requests(self) -> list[PlanRequest]:
+        """Requests for the node to send to the planner (each once)."""
+        return self.goals.take_requests()
+
+    def on_timed_plan(self, now_s: float, timed: TimedPlan) -> None:
+        """Take a timed plan (``PlanTimer.time_plan``); stale answers are ignored."""
+        self.goals.on_timed_plan(now_s, timed, self._rest_q())
+
+    def on_planner_available(self, now_s: float, available: bool) -> None:
+        """Say when the planner comes or goes: a goal sent while it is away fails at its
+        planner timeout, and the reason should already be on record."""
+        if available == self.planner_available:
+            return
+        if available:
+            self._say(now_s, Kind.PLANNER_AVAILABLE, 'info',
+                      'the planner (plan_path) is available')
+        elif self.planner_available is None:
+            self._say(now_s, Kind.PLANNER_WAITING, 'info',
+                      'waiting for the planner (plan_path) to appear')
+        else:
+            self._say(now_s, Kind.PLANNER_GONE, 'warning',
+                      'the planner (plan_path) is gone: goals fail until it is back')
+        self.planner_available = available
+
+    # ------------------------------------------------------------------ the control period
+
+    def step(self, now_s: float, reading=None, reading_time_s: Optional[float] = None):
+        """One control period: returns [Va, Vb] to apply until the next one.
+
+        ``reading``: the sensors' latest sample if one arrived since the last step (an
+        ``ArmPlant`` Reading or a ``SensorReading``), else None; ``reading_time_s`` when it
+        was taken (default now).
+        """
+        dt_s = self.period_s if self.last_step_s is None else max(now_s - self.last_step_s, 0.0)
+        self.last_step_s = now_s
+        self.sensing.update(now_s, reading, reading_time_s, self.voltage)
+        self._supervise(now_s)
+        pending = self.goals.plans.pending
+        if pending is not None and self.planner is not None:
+            self.goals.take_requests()
+            self.on_timed_plan(now_s, self.plan_timer.plan_and_time(pending, self.planner))
+        self.events.flush(now_s)
+        if self.state in STOPPED and not self.estop_holding:
+            self.voltage, self.tracking_error_rad = np.zeros(2), np.zeros(2)
+            return self.voltage.copy()
+        self.voltage = self._control(now_s, dt_s)
+        failure = self.safety.tracking_failed(now_s, self.tracking_error_rad)
+        if failure is not None:
+            self.estop(now_s, failure, cut_power=True)
+            self.voltage = np.zeros(2)
+        return self.voltage.copy()
+
+    def _supervise(self, now_s: float) -> None:
+        """Sensors, joint limits, a jump of the sensors, then the goals."""
+        # The command sent now holds for a period: stop now if by its end the last reading
+        # would be older than the timeout, so commanding ends within joint_state_timeout_s.
+        age_s = self.sensing.age_s(now_s)
+        fresh = age_s + self.period_s <= self.config.joint_state_timeout_s
+        if not fresh and self.machine.can(T.SENSORS_LOST):
+            self.goals.interrupt()                  # resumed when the sensors return
+            self.machine.fire(T.SENSORS_LOST)
+            self.goals.last_error = (f'no joint states for {age_s:.3f} s (limit '
+                                     f'{self.config.joint_state_timeout_s:g} s)')
+            self._say(now_s, Kind.SENSORS_LOST, 'error',
+                      f'{self.goals.last_error}: sending 0 V until they return')
+        if not fresh and self.estop_holding:
+            self.estop(now_s, f'no joint states for {age_s:.3f} s while holding', cut_power=True)
+        if fresh and self.state == S.NO_SENSORS:
+            self.machine.fire(T.SENSORS_BACK)
+            self._say(now_s, Kind.SENSORS_BACK, 'info',
+                      f'joint states arriving: {self._resume(now_s)}')
+        if self.state in STOPPED:
+            self.sensing.jumped = False
+            self.setpoints.prune(now_s)
+            return
+        limit = self.safety.past_a_limit(self.sensing.last_potentiometer)
+        if limit is not None:
+            self.estop(now_s, limit, cut_power=True)
+            return
+        if self.sensing.jumped:
+            self.sensing.jumped = False
+            if np.max(np.abs(self.sensing.state[:2] - self._reference(now_s)[0])) > \
+                    self.config.tracking_error_limit_rad:
+                self._moved(now_s)      # a small jump the PID takes back; a large one, not
+        self.setpoints.prune(now_s)
+        if self.state == S.DRIVER and self.setpoints.driver.idle(now_s):
+            self.machine.fire(T.DRIVER_IDLE)
+            self.setpoints.brake(now_s)
+            self._say(now_s, Kind.DRIVER_IDLE, 'info', 'driver commands stopped: holding')
+        self.goals.supervise(now_s, self.sensing.state, self.planner_available)
+
+    def _control(self, now_s: float, dt_s: float) -> np.ndarray:
+        """Feedforward at the setpoint plus PID on the estimate, clamped to the bus voltage."""
+        if self.state == S.DRIVER:
+            self.setpoints.driver.decide(now_s)
+        self.setpoint = self._reference(now_s)
+        # The voltage is held over the coming period: the feedforward keeps a model of the
+        # arm on the trajectory at every period's end; the PID tracks that model.
+        bus = self.sensing.bus_voltage
+        feedforward = self.feedforward.step(now_s, self._reference, bus_voltage=bus)
+        reference, estimate = self.feedforward.state, self.sensing.state
+        error = reference[:2] - estimate[:2]
+        feedback = np.array(self.pid.update(error, reference[2:] - estimate[2:], dt_s,
+                                            self.saturated))
+        total = feedforward + feedback
+        self.saturated = tuple(int(np.sign(v)) if abs(v) > bus else 0 for v in total)
+        self.tracking_error_rad = error
+        self.feedforward_v, self.feedback_v = feedforward, feedback
+        self.commanded_q = np.asarray(self.setpoint[0], float).copy()
+        return np.clip(total, -bus, bus)
+
+    def _reference(self, t_s: float):
+        """The setpoint (q, q̇, q̈) at ``t_s``; the estimate, at rest, before any."""
+        sample = self.setpoints.sample(t_s)
+        return (self._rest_q().copy(), np.zeros(2), np.zeros(2)) if sample is None else sample
+
+    def _moved(self, now_s: float) -> None:
+        """The sensors say the arm is far from where the filter had it (pushed, the sim
+        reset): hold where it is now; an interrupted goal is planned again from there."""
+        self.goals.interrupt()
+        self.machine.fire(T.MOVED)
+        self.commanded_q = None              # put there on purpose: no going back
+        q = np.degrees(self.sensing.state[:2])
+        self._say(now_s, Kind.ARM_MOVED, 'warning',
+                  f'the arm is not where it was (moved, or the sim reset) at '
+                  f'({q[0]:.1f}, {q[1]:.1f}) deg: {self._resume(now_s)}')
+
+    def _resume(self, now_s: float) -> str:
+        """Take control back after 0 V (``SafetyRules.resume``); says what it does."""
+        motion, what = self.safety.resume(now_s, self._rest_q().copy(), self.commanded_q)
+        self.setpoints.driving = False
+        self.setpoints.schedule(motion)
+        self.goals.goal_q = None
+        self.pid.reset()
+        return what
+
+    def _say(self, now_s: float, kind: Kind, level: str, message: str) -> tuple[bool, str]:
+        self.events.say(now_s, kind, level, message)
+        return True, message
+
+    # ------------------------------------------------------------------ outputs
+
+    def pending_goals(self):
+        """The current goal (first) and the queued ones, in the order they will be visited."""
+        return self.goals.queue.pending()
+
+    def diagnostics(self, now_s: float) -> dict:
+        return {
+            'state': str(self.state),
+            'queued goals': len(self.goals.queue.waiting),
+            'current goal': self.goals.queue.current.label if self.goals.queue.current else '',
+            'joint states age (s)': f'{self.sensing.age_s(now_s):.3f}',
+            'bus voltage (V)': f'{self.sensing.bus_voltage:.2f}',
+            'last error': self.last_error,
+            'voltage (V)': [round(float(v), 3) for v in self.voltage],
+            'tracking error (deg)': [round(math.degrees(e), 3) for e in self.tracking_error_rad],
+            'e-stops': self.estops,
+            **{f'goals {k}': v for k, v in self.goals.counts.items()},
+        }

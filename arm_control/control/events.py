@@ -1,0 +1,113 @@
+"""What the controller tells people: events with a kind, a level and a sentence.
+
+Every goal gets an answer: queued, accepted, rejected, failed or reached. In a flood the
+rejections beyond ``REJECTIONS_PER_WINDOW`` in a window are not said one by one: they are
+counted by reason and said in one ``goals_rejected`` event per window, so none is lost
+silently and a listener is not drowned. Text that came from outside (a preset's name, a
+frame) is quoted by ``quote``: at most a short prefix, with the length.
+"""
+
+from collections import deque
+from dataclasses import dataclass
+from enum import Enum
+
+REJECTIONS_PER_WINDOW = 20
+WINDOW_S = 1.0
+HISTORY = 200
+QUOTE_CHARS = 40
+
+
+class EventKind(str, Enum):
+    GOAL_QUEUED = 'goal_queued'
+    GOAL_ACCEPTED = 'goal_accepted'            # taken now (a preset, a preempting goal)
+    GOAL_REJECTED = 'goal_rejected'
+    GOALS_REJECTED = 'goals_rejected'          # a window's rejections beyond the burst, counted
+    GOAL_FAILED = 'goal_failed'                # no plan, no trajectory, planner timeout
+    GOAL_REACHED = 'goal_reached'
+    CANCELLED = 'cancelled'
+    ESTOP = 'estop'                            # asked for (a service, a client)
+    CONTROL_FAILED = 'control_failed'          # an e-stop at 0 V: control itself failed
+    RESET = 'reset'
+    ENABLED = 'enabled'
+    DISABLED = 'disabled'
+    SENSORS_LOST = 'sensors_lost'
+    SENSORS_BACK = 'sensors_back'
+    ARM_MOVED = 'arm_moved'                    # the sensors jumped: held where it now is
+    LIFTING_CLEAR = 'lifting_clear'            # a hold begins by lifting out of the margin
+    NOT_CLEAR = 'not_clear'                    # ... and no short move could
+    DRIVER = 'driver'
+    DRIVER_IDLE = 'driver_idle'
+    PLANNER_WAITING = 'planner_waiting'
+    PLANNER_AVAILABLE = 'planner_available'
+    PLANNER_GONE = 'planner_gone'
+    PARAMETERS = 'parameters'                  # a setting changed at run time
+
+    def __str__(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something people should hear about."""
+
+    time_s: float
+    kind: EventKind
+    level: str          # 'info', 'warning' (a goal rejected or failed), 'error' (e-stop)
+    message: str
+    cause: str = ''     # a few words to count and test by ('out of reach', 'queue full', ...)
+
+    def __str__(self) -> str:
+        return f'{self.kind}: {self.message}'
+
+
+def quote(text: str, limit: int = QUOTE_CHARS) -> str:
+    """``text`` in quotes, or its first ``limit`` characters and its length when longer."""
+    if len(text) <= limit:
+        return repr(text)
+    return f'{text[:limit]!r}... ({len(text)} characters)'
+
+
+class EventLog:
+    """Events as they happen; a window's rejections beyond the burst are counted instead."""
+
+    def __init__(self):
+        self.history: deque[Event] = deque(maxlen=HISTORY)
+        self._new: list[Event] = []
+        self._window_start_s = float('-inf')
+        self._window_rejections = 0
+        self._counted: dict[str, int] = {}        # reason -> rejections not said one by one
+
+    def say(self, now_s: float, kind: EventKind, level: str, message: str,
+            cause: str = '') -> Event:
+        event = Event(now_s, kind, level, message, cause)
+        self.history.append(event)
+        self._new.append(event)
+        del self._new[:-HISTORY]
+        return event
+
+    def reject(self, now_s: float, message: str, reason: str) -> None:
+        """A goal rejected: said, unless the window has had its burst; then counted."""
+        self.flush(now_s)
+        self._window_rejections += 1
+        if self._window_rejections <= REJECTIONS_PER_WINDOW:
+            self.say(now_s, EventKind.GOAL_REJECTED, 'warning', message, reason)
+        else:
+            self._counted[reason] = self._counted.get(reason, 0) + 1
+
+    def flush(self, now_s: float) -> None:
+        """Close the window once it is over: one event with the count of what was counted."""
+        if now_s - self._window_start_s < WINDOW_S:
+            return
+        if self._counted:
+            total = sum(self._counted.values())
+            reasons = '; '.join(f'{count} {reason}' for reason, count in self._counted.items())
+            self.say(now_s, EventKind.GOALS_REJECTED, 'warning',
+                     f'{total} more goals rejected in the last {now_s - self._window_start_s:.1f}'
+                     f' s ({reasons})')
+            self._counted = {}
+        self._window_start_s, self._window_rejections = now_s, 0
+
+    def take(self) -> list[Event]:
+        """Events since the last call (for the node to log and publish)."""
+        out, self._new = self._new, []
+        return out

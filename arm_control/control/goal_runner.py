@@ -1,0 +1,194 @@
+"""Goals from arrival to arrival: validated and queued, planned, taken over, reached or failed.
+
+The runner shares the core's state machine, event log and setpoints (``controller.py``); it
+decides which goal comes next and what a planner's answer means, the core runs the loop.
+A goal waits in the queue; the next one starts when the arm is idle (after the dwell at the
+last one); starting it asks for a plan from where the setpoint will be (``PlanHandoff``);
+the plan's motion takes over on time, or the goal fails with the reason.
+"""
+
+import math
+from typing import Optional
+
+import numpy as np
+
+from arm_control.config import ArmConfig, ControllerConfig
+from arm_control.control.events import EventKind as Kind, EventLog, quote
+from arm_control.control.goals import Goal, GoalQueue, GoalValidator
+from arm_control.control.motions import Motion, Setpoints
+from arm_control.control.plans import PlanHandoff, PlanRequest, TimedPlan
+from arm_control.control.state_machine import ArmState as S, StateMachine, Trigger as T
+
+# A preempting goal's new trajectory starts this far ahead on the current one: the time
+# the planner and the timing need, so the switch happens on time. Doubled on each retry.
+PREEMPT_LEAD_S = 0.1
+
+
+class GoalRunner:
+    """The goal queue and the goal in hand."""
+
+    def __init__(self, arm: ArmConfig, config: ControllerConfig, machine: StateMachine,
+                 events: EventLog, setpoints: Setpoints):
+        self.arm, self.config = arm, config
+        self.machine, self.events, self.setpoints = machine, events, setpoints
+        self.validator = GoalValidator(arm, config.clamp_unreachable_goals)
+        self.queue = GoalQueue(config.goal_queue_size)
+        self.plans = PlanHandoff(config.planner_timeout_s)
+        self.goal_q: Optional[np.ndarray] = None     # where the current trajectory ends
+        self.arrived_s = -math.inf
+        self.last_error = ''
+        self.counts = dict.fromkeys(('queued', 'started', 'rejected', 'reached', 'failed'), 0)
+
+    # ------------------------------------------------------------------ goals in
+
+    def submit(self, now_s: float, x: float, y: float, z: float, frame_id: str,
+               label: Optional[str], preempt: bool, rest_q) -> tuple[bool, str]:
+        """Queue a goal point -- or, with ``preempt``, drop the queue and go there now from
+        wherever the arm is, moving or not. ``rest_q``: where the arm rests if it has no
+        setpoint yet. Returns (accepted, the sentence said)."""
+        state = self.machine.state
+        if state in (S.ESTOPPED, S.DISABLED):
+            fix = 'call reset' if state == S.ESTOPPED else 'enable it'
+            return self.reject(now_s, f'goal {label or (x, y)} rejected: the arm is {state}; '
+                                      f'{fix} first', str(state))
+        check = self.validator.check(x, y, z, frame_id, label)
+        if not check.ok:
+            return self.reject(now_s, f'goal rejected: {check.reason}', check.category)
+        goal, note = check.goal, f' ({check.goal.note})' if check.goal.note else ''
+        if preempt:
+            dropped = self.drop()
+            extra = f'; {dropped} earlier goals dropped' if dropped else ''
+            if self.machine.can(T.GOAL):
+                self.start(now_s, goal, rest_q)
+                return self._accept(now_s, Kind.GOAL_ACCEPTED,
+                                    f'goal {goal.label} accepted{note}: going there now{extra}')
+            self.queue.append(goal)
+            return self._accept(now_s, Kind.GOAL_ACCEPTED,
+                                f'goal {goal.label} accepted{note}: next{extra}')
+        if self.queue.full:
+            return self.reject(now_s, f'goal {goal.label} rejected: the queue is full '
+                                      f'({self.config.goal_queue_size} goals waiting); the '
+                                      'queued goals are kept', 'the queue full')
+        self.queue.append(goal)
+        self.counts['queued'] += 1
+        return self._accept(now_s, Kind.GOAL_QUEUED, f'goal {goal.label} queued{note} '
+                                                     f'({len(self.queue.waiting)} waiting)')
+
+    def submit_preset(self, now_s: float, name: str, preempt: bool, rest_q) -> tuple[bool, str]:
+        """A named goal from the parameter file, as a driver's button."""
+        for preset, x, y in self.arm.presets:
+            if preset == name:
+                return self.submit(now_s, x, y, 0.0, '', f"preset '{name}'", preempt, rest_q)
+        known = ', '.join(p[0] for p in self.arm.presets) or 'none'
+        return self.reject(now_s, f'preset {quote(name)} rejected: no such preset (known: '
+                                  f'{known})', 'no such preset')
+
+    def reject(self, now_s: float, message: str, reason: str) -> tuple[bool, str]:
+        """Say (or count, in a flood) why; an idle arm shows it in the ``error`` state."""
+        self.counts['rejected'] += 1
+        self.last_error = message
+        self.events.reject(now_s, message, reason)
+        if not self.queue and self.machine.can(T.GOAL_FAILED):
+            self.machine.fire(T.GOAL_FAILED)
+        return False, message
+
+    def _accept(self, now_s: float, kind: Kind, message: str) -> tuple[bool, str]:
+        self.events.say(now_s, kind, 'info', message)
+        return True, message
+
+    # ------------------------------------------------------------------ the goal in hand
+
+    def start(self, now_s: float, goal: Goal, rest_q, from_queue: bool = False) -> None:
+        """Make ``goal`` current and ask for its plan (leaving driver mode by braking)."""
+        if self.setpoints.driving:
+            self.setpoints.brake(now_s)
+        if not from_queue:
+            self.queue.start(goal)
+        self.plans.start(now_s)
+        self.counts['started'] += 1
+        self.machine.fire(T.GOAL)
+        self.ask(now_s, goal, rest_q)
+
+    def ask(self, now_s: float, goal: Goal, rest_q, lead_s: float = PREEMPT_LEAD_S) -> None:
+        """A plan from where the setpoint will be ``lead_s`` ahead if it is still moving then
+        (the new motion takes over there), else from where it comes to rest."""
+        start_time = now_s + lead_s
+        timeline = self.setpoints.timeline
+        if timeline.moving_at(start_time):
+            q, qd, _ = timeline.sample(start_time)
+            self.plans.ask(now_s, goal, q, qd, start_time, lead_s)
+        else:
+            last = timeline.last
+            self.plans.ask(now_s, goal, rest_q if last is None else last.final_q, (0.0, 0.0),
+                           None, lead_s)
+
+    def take_requests(self) -> list[PlanRequest]:
+        return self.plans.take()
+
+    def on_timed_plan(self, now_s: float, timed: TimedPlan, rest_q) -> None:
+        """Take a timed plan; answers to older requests are ignored."""
+        last = self.setpoints.timeline.last
+        verdict, value = self.plans.answer(now_s, timed, -math.inf if last is None
+                                           else last.end_s)
+        if verdict == 'fail':
+            self.fail(now_s, value)
+        elif verdict == 'retry':
+            self.ask(now_s, timed.request.goal, rest_q, value)
+        elif verdict == 'take':
+            motion = Motion(timed.trajectory, value)
+            self.setpoints.schedule(motion)
+            self.goal_q = motion.final_q
+            self.machine.fire(T.PLAN_READY)
+
+    def fail(self, now_s: float, reason: str) -> None:
+        self.plans.drop()
+        self.counts['failed'] += 1
+        goal = self.queue.finish()
+        self.setpoints.brake(now_s)
+        if self.machine.can(T.PLAN_FAILED):
+            self.machine.fire(T.PLAN_FAILED)
+        self.last_error = f'goal {goal.label if goal else ""} failed: {reason}'
+        self.events.say(now_s, Kind.GOAL_FAILED, 'warning', self.last_error)
+
+    def supervise(self, now_s: float, estimate, planner_available) -> None:
+        """The planner's deadline, arrival, and the next goal once the arm is idle."""
+        if self.plans.overdue(now_s):
+            note = ' (the plan_path service is not available)' \
+                if planner_available is False else ''
+            self.fail(now_s, f'the planner did not answer within '
+                             f'{self.config.planner_timeout_s:g} s{note}')
+        state = self.machine.state
+        if state == S.TRACKING and self._arrived(now_s, estimate):
+            self._arrive(now_s, estimate)
+        idle = self.machine.state in (S.WAITING, S.ERROR) or (
+            self.machine.state == S.HOLDING and now_s >= self.arrived_s + self.config.dwell_s)
+        if idle and self.queue.waiting:
+            self.start(now_s, self.queue.start_next(), estimate[:2], from_queue=True)
+
+    def _arrived(self, now_s: float, estimate) -> bool:
+        """Done moving, both joints within tolerance of the goal and nearly still."""
+        if self.setpoints.moving_at(now_s) or self.goal_q is None:
+            return False
+        return bool(np.all(np.abs(estimate[:2] - self.goal_q) <= self.config.goal_tolerance_rad)
+                    and np.all(np.abs(estimate[2:]) <= self.config.settled_velocity_rad_s))
+
+    def _arrive(self, now_s: float, estimate) -> None:
+        error = np.degrees(estimate[:2] - self.goal_q)
+        self.machine.fire(T.ARRIVED)
+        self.arrived_s = now_s
+        self.counts['reached'] += 1
+        goal = self.queue.finish()
+        self.events.say(now_s, Kind.GOAL_REACHED, 'info',
+                        f'reached {goal.label} {now_s - self.plans.started_s:.2f} s after '
+                        f'starting it (error {error[0]:+.2f}, {error[1]:+.2f} deg)')
+
+    def interrupt(self) -> None:
+        """The arm stopped under the goal (sensors lost, moved): it goes first again."""
+        self.plans.drop()
+        self.queue.put_back()
+        self.goal_q = None
+
+    def drop(self) -> int:
+        """Forget every goal; returns how many there were."""
+        self.plans.drop()
+        return self.queue.clear()

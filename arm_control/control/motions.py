@@ -1,0 +1,230 @@
+"""Motions: the setpoint over time, as trajectories pinned to the clock.
+
+The controller's setpoint is a ``Timeline`` of motions, each taking over from the one before at
+its ``begin_s``: a timed trajectory to a goal, a hold, or a stop along the path it was on.
+"""
+
+from typing import Optional
+
+import numpy as np
+
+
+class HoldTrajectory:
+    """Stand still at ``q``: the trajectory of holding."""
+
+    duration_s = 0.0
+
+    def __init__(self, q):
+        self.q = np.array(q, dtype=float)
+
+    def sample(self, t_s):
+        return self.q.copy(), np.zeros(2), np.zeros(2)
+
+
+class ChainedTrajectory:
+    """Trajectories one after another, each starting where and when the last one ends."""
+
+    def __init__(self, parts):
+        self.parts = list(parts)
+        self.offsets_s = np.concatenate([[0.0], np.cumsum([p.duration_s for p in self.parts])])
+        self.duration_s = float(self.offsets_s[-1])
+
+    def sample(self, t_s):
+        index = int(np.clip(np.searchsorted(self.offsets_s, t_s, side='right') - 1,
+                            0, len(self.parts) - 1))
+        return self.parts[index].sample(t_s - self.offsets_s[index])
+
+
+class Motion:
+    """A trajectory pinned to the clock: it takes over at ``begin_s`` and is at rest from
+    ``end_s`` on, at ``final_q``."""
+
+    def __init__(self, trajectory, begin_s: float):
+        self.trajectory = trajectory
+        self.begin_s = float(begin_s)
+        self.end_s = self.begin_s + float(trajectory.duration_s)
+        self.final_q = np.asarray(trajectory.sample(trajectory.duration_s)[0], float).copy()
+
+    def sample(self, now_s: float):
+        """(q, q̇, q̈) at ``now_s``; at rest on ``final_q`` from ``end_s`` on."""
+        if now_s >= self.end_s:
+            return self.final_q.copy(), np.zeros(2), np.zeros(2)
+        q, qd, qdd = self.trajectory.sample(max(now_s - self.begin_s, 0.0))
+        return np.asarray(q, float), np.asarray(qd, float), np.asarray(qdd, float)
+
+    def finished(self, now_s: float) -> bool:
+        return now_s >= self.end_s
+
+
+class StoppingMotion(Motion):
+    """Brake to rest along the path a motion was following (a path known to be free).
+
+    Path time τ runs at rate r = 1 − (t − t₀)/T, from 1 down to 0 over T, so
+    q = p(τ), q̇ = ṗ(τ)·r, q̈ = p̈(τ)·r² − ṗ(τ)/T; T is what the acceleration limits need.
+    """
+
+    def __init__(self, base: Motion, now_s: float, acceleration_limits):
+        _, qd, _ = base.sample(now_s)
+        self.base = base
+        self.begin_s = float(now_s)
+        need = float(np.max(np.abs(qd) / np.asarray(acceleration_limits, float)))
+        self.brake_s = max(1.5 * need, 0.05)
+        self.end_s = self.begin_s + self.brake_s
+        self.final_q = self._path(self.brake_s)[0]
+
+    def _path(self, elapsed_s):
+        elapsed = min(max(elapsed_s, 0.0), self.brake_s)
+        rate = 1.0 - elapsed / self.brake_s
+        tau = elapsed - elapsed ** 2 / (2.0 * self.brake_s)
+        q, qd, qdd = self.base.sample(self.begin_s + tau)
+        return q, qd * rate, qdd * rate ** 2 - qd / self.brake_s
+
+    def sample(self, now_s: float):
+        if now_s >= self.end_s:
+            return self.final_q.copy(), np.zeros(2), np.zeros(2)
+        return self._path(now_s - self.begin_s)
+
+
+class StraightStop(Motion):
+    """Brake to rest in a straight line: q̇ = q̇₀·(1 − t/T), T = max |q̇₀ᵢ|/aᵢ."""
+
+    def __init__(self, q, qd, now_s: float, acceleration_limits):
+        self.q0, self.qd0 = np.array(q, float), np.array(qd, float)
+        self.brake_s = max(float(np.max(np.abs(self.qd0) / np.asarray(acceleration_limits))),
+                           1e-6)
+        self.begin_s = float(now_s)
+        self.end_s = self.begin_s + self.brake_s
+        self.final_q = self.q0 + 0.5 * self.qd0 * self.brake_s
+
+    def sample(self, now_s: float):
+        t = now_s - self.begin_s
+        if t >= self.brake_s:
+            return self.final_q.copy(), np.zeros(2), np.zeros(2)
+        t = max(t, 0.0)
+        return (self.q0 + self.qd0 * (t - t * t / (2.0 * self.brake_s)),
+                self.qd0 * (1.0 - t / self.brake_s), -self.qd0 / self.brake_s)
+
+
+class Timeline:
+    """The setpoint over time: motions, each taking over from the one before at its
+    ``begin_s``. Scheduling a motion drops those that would begin at or after it."""
+
+    def __init__(self):
+        self.motions: list[Motion] = []
+
+    def schedule(self, motion: Motion) -> None:
+        self.motions = [m for m in self.motions if m.begin_s < motion.begin_s] + [motion]
+
+    def at(self, t_s: float) -> Optional[Motion]:
+        """The motion in charge at ``t_s`` (the first one before any has begun)."""
+        current = self.motions[0] if self.motions else None
+        for motion in self.motions:
+            if motion.begin_s <= t_s:
+                current = motion
+        return current
+
+    def prune(self, now_s: float) -> None:
+        active = self.at(now_s)
+        if active is not None:
+            self.motions = self.motions[self.motions.index(active):]
+
+    @property
+    def last(self) -> Optional[Motion]:
+        return self.motions[-1] if self.motions else None
+
+    def sample(self, t_s: float):
+        motion = self.at(t_s)
+        return None if motion is None else motion.sample(t_s)
+
+    def moving_at(self, t_s: float) -> bool:
+        last = self.last
+        return last is not None and not last.finished(t_s)
+
+
+class StraightMove(Motion):
+    """From rest at ``q0`` to rest at ``q1`` along the straight joint-space line, as fast as
+    ``max_acceleration_rad_s2`` and ``max_velocity_rad_s`` allow each joint: both joints
+    follow one profile s(t) from 0 to 1 (accelerate, cruise, brake). For short moves whose
+    limits are what the motors surely give in any pose: no timing solve is needed."""
+
+    def __init__(self, q0, q1, now_s: float, max_acceleration_rad_s2, max_velocity_rad_s):
+        self.q0, self.q1 = np.array(q0, float), np.array(q1, float)
+        delta = np.abs(self.q1 - self.q0)
+        moving = delta > 0.0
+        self.acceleration = float(np.min(np.asarray(max_acceleration_rad_s2)[moving]
+                                         / delta[moving])) if np.any(moving) else 1.0
+        speed = float(np.min(np.asarray(max_velocity_rad_s)[moving] / delta[moving])) \
+            if np.any(moving) else 1.0
+        ramp_s = min(speed / self.acceleration, np.sqrt(1.0 / self.acceleration))
+        self.peak = self.acceleration * ramp_s                 # ds/dt at the top
+        self.ramp_s = ramp_s
+        self.cruise_s = (1.0 - self.acceleration * ramp_s ** 2) / self.peak
+        self.begin_s = float(now_s)
+        self.end_s = self.begin_s + 2.0 * ramp_s + self.cruise_s if np.any(moving) \
+            else self.begin_s
+        self.final_q = self.q1.copy()
+
+    def _profile(self, t: float):
+        """(s, ṡ, s̈) at time t from the start."""
+        a, ramp, cruise = self.acceleration, self.ramp_s, self.cruise_s
+        if t < ramp:
+            return 0.5 * a * t * t, a * t, a
+        if t < ramp + cruise:
+            return 0.5 * a * ramp * ramp + self.peak * (t - ramp), self.peak, 0.0
+        left = max(2.0 * ramp + cruise - t, 0.0)
+        return 1.0 - 0.5 * a * left * left, a * left, -a
+
+    def sample(self, now_s: float):
+        if now_s >= self.end_s:
+            return self.final_q.copy(), np.zeros(2), np.zeros(2)
+        s, sd, sdd = self._profile(max(now_s - self.begin_s, 0.0))
+        step = self.q1 - self.q0
+        return self.q0 + s * step, sd * step, sdd * step
+
+
+class Setpoints:
+    """Where the arm should be at any time: the timeline's motions, or in driver mode the
+    driver's setpoint (``DriverMode``). Braking and holding act on whichever is in charge."""
+
+    def __init__(self, driver, max_acceleration_rad_s2):
+        self.timeline = Timeline()
+        self.driver = driver
+        self.driving = False
+        self.max_acceleration = np.asarray(max_acceleration_rad_s2, float)
+
+    def sample(self, t_s: float):
+        """(q, q̇, q̈) at ``t_s``; None before any motion."""
+        return self.driver.sample(t_s) if self.driving else self.timeline.sample(t_s)
+
+    def schedule(self, motion: Motion) -> None:
+        self.timeline.schedule(motion)
+
+    def hold(self, q, now_s: float) -> None:
+        self.timeline.schedule(Motion(HoldTrajectory(q), now_s))
+
+    def drive(self, now_s: float, q, qd) -> None:
+        """The driver takes over from the setpoint (q, q̇) being followed now."""
+        self.driver.take_over(now_s, q, qd)
+        self.driving = True
+
+    def brake(self, now_s: float) -> None:
+        """Come to rest from the current setpoint (along its path) and hold there."""
+        if self.driving:
+            q, qd, _ = self.driver.sample(now_s)
+            self.driving = False
+            self.timeline.schedule(StraightStop(q, qd, now_s, self.max_acceleration)
+                                   if np.any(qd) else Motion(HoldTrajectory(q), now_s))
+            return
+        motion = self.timeline.at(now_s)
+        if motion is None:
+            return
+        if motion.finished(now_s):
+            self.hold(motion.final_q, now_s)
+        else:
+            self.timeline.schedule(StoppingMotion(motion, now_s, self.max_acceleration))
+
+    def moving_at(self, t_s: float) -> bool:
+        return self.timeline.moving_at(t_s)
+
+    def prune(self, now_s: float) -> None:
+        self.timeline.prune(now_s)

@@ -1,0 +1,247 @@
+"""From a planner's path to a checked, timed trajectory -- the slow part of taking a goal.
+
+The controller core asks for a plan (``PlanRequest``) and takes back a ``TimedPlan``. What
+lies between -- checking the path, choosing the elbow branch by time, timing the path -- is
+here, pure and free of the core's mutable state, so the node runs it in a worker process
+while its control loop keeps the beat, and tests and benchmarks call it directly.
+
+The elbow branch is chosen by time, the same way in-process and through the planner node
+(``fastest_branch``): each free branch's path is estimated quickly; those within
+``BRANCH_SCREEN_MARGIN`` of the best are timed in full; the fastest wins. Ranking uses the
+arm's own limits (the battery, the current limits), not the controller's reserves, so the
+planner node, which knows only the arm, ranks exactly as the controller would.
+"""
+
+from dataclasses import dataclass, replace
+import math
+import time
+from typing import Optional
+
+import numpy as np
+
+from arm_control.config import ArmConfig, ControllerConfig
+from arm_control.control.goals import Goal, GoalValidator
+from arm_control.control.motions import ChainedTrajectory
+from arm_control.control.trajectory import (estimated_duration_s, time_optimal_trajectory,
+                                            TrajectoryError, TrajectoryLimits)
+from arm_control.model.dynamics import ArmDynamics
+from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.model.world import ForbiddenSpace
+
+# Branches whose quick estimate is within this fraction of the best one's are timed in full.
+BRANCH_SCREEN_MARGIN = 0.25
+# The first waypoint of a plan may differ from the requested start by rounding only ...
+PLAN_START_TOLERANCE_RAD = 0.01
+# ... and its last must put the tool on the goal.
+PLAN_GOAL_TOLERANCE_M = 0.002
+
+
+@dataclass(frozen=True)
+class PlanRequest:
+    """Plan a path from ``start_q`` to ``goal``; the motion starts at ``start_time_s`` moving
+    at ``start_velocity_rad_s`` (a preempted motion) or, when None, on acceptance at rest."""
+
+    request_id: int
+    goal: Goal
+    start_q: tuple[float, float]
+    start_velocity_rad_s: tuple[float, float]
+    start_time_s: Optional[float]
+    sent_time_s: float
+    lead_s: float = 0.1
+
+
+@dataclass(frozen=True)
+class PathPlan:
+    """A planner's answer as the timing takes it: joint waypoints, or the reason there are
+    none (the planner's own ``Plan`` has the same fields)."""
+
+    waypoints_rad: np.ndarray
+    reason: str = ''
+
+    @property
+    def ok(self) -> bool:
+        return not self.reason
+
+
+@dataclass(frozen=True)
+class TimedPlan:
+    """A request's answer: a checked, timed trajectory, or the reason there is none."""
+
+    request: PlanRequest
+    trajectory: object = None
+    reason: str = ''
+    compute_s: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return self.trajectory is not None
+
+
+class Anywhere:
+    """Free space everywhere: for timing the way out of forbidden space, which the arm is
+    already in (the planner's first leg from a start pushed there)."""
+
+    def is_free(self, q):
+        free = np.ones(np.asarray(q, float).shape[:-1], dtype=bool)
+        return bool(free) if free.ndim == 0 else free
+
+
+class PlanTimer:
+    """Checks and times plans for one arm and controller configuration."""
+
+    def __init__(self, arm: ArmConfig, config: ControllerConfig):
+        self.arm = arm
+        self.dynamics = ArmDynamics(arm)
+        self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+        self.forbidden = ForbiddenSpace(arm)
+        self.clear_space = ForbiddenSpace(arm, arm.world.clearance_rad)
+        self.limits = TrajectoryLimits.from_config(arm, config)
+        self.ranking = BranchRanking(arm)
+
+    def time_plan(self, request: PlanRequest, plan) -> TimedPlan:
+        """Check ``plan`` (anything with ``ok``, ``reason`` and ``waypoints_rad``) against the
+        request and time it."""
+        started = time.perf_counter()
+        try:
+            trajectory, reason = self._time(request, plan)
+        except TrajectoryError as error:
+            trajectory = None
+            reason = f'no trajectory along the plan to {request.goal.label}: {error}'
+        return TimedPlan(request, trajectory, reason, time.perf_counter() - started)
+
+    def _time(self, request: PlanRequest, plan):
+        label = request.goal.label
+        if plan is None or not plan.ok:
+            why = getattr(plan, 'reason', '') or 'the planner found no path'
+            return None, f'no plan to {label}: {why}'
+        waypoints = np.array(plan.waypoints_rad, dtype=float).reshape(-1, 2)
+        if len(waypoints) == 0 or not np.all(np.isfinite(waypoints)):
+            return None, f'the plan to {label} is empty or not finite'
+        start = np.asarray(request.start_q, float)
+        if np.max(np.abs(waypoints[0] - start)) > PLAN_START_TOLERANCE_RAD:
+            return None, (f'the plan to {label} starts at {np.round(waypoints[0], 3).tolist()} '
+                          f'rad, not where the arm is ({np.round(start, 3).tolist()} rad)')
+        waypoints[0] = start
+        end_xy = self.kinematics.forward(waypoints[-1])
+        if math.dist(end_xy, request.goal.xy) > PLAN_GOAL_TOLERANCE_M:
+            return None, (f'the plan to {label} ends at ({end_xy[0]:.3f}, {end_xy[1]:.3f}) m, '
+                          'not at the goal')
+        escape = len(waypoints) > 2 and not self.forbidden.is_free(start)
+        out, rest = (waypoints[:2], waypoints[1:]) if escape else (None, waypoints)
+        if len(rest) > 1 and not self.forbidden.path_is_free(rest):
+            return None, f'the plan to {label} enters forbidden space: refused'
+        # A path that keeps the clearance is bent (when the timing finds a faster shape)
+        # only where it keeps it still.
+        space = self.clear_space if self.clear_space.path_is_free(rest) else self.forbidden
+        velocity = request.start_velocity_rad_s
+        if out is None:
+            return time_optimal_trajectory(rest, self.dynamics, space, self.limits,
+                                           start_velocity_rad_s=velocity), ''
+        first = time_optimal_trajectory(out, self.dynamics, Anywhere(), self.limits,
+                                        start_velocity_rad_s=velocity)
+        second = time_optimal_trajectory(rest, self.dynamics, space, self.limits)
+        return ChainedTrajectory([first, second]), ''
+
+    def plan_and_time(self, request: PlanRequest, planner) -> TimedPlan:
+        """Plan with ``planner`` in-process and time the plan: each free elbow branch is
+        planned (``plan_to_configuration``) and the fastest taken (``fastest_branch``); a
+        planner that cannot plan to a configuration chooses the branch itself."""
+        started = time.perf_counter()
+        if hasattr(planner, 'plan_to_configuration'):
+            plans = [planner.plan_to_configuration(request.start_q, q)
+                     for q in self.ranking.validator.free_configurations(*request.goal.xy)]
+            best = self.ranking.fastest_branch([p for p in plans if p.ok])
+            plan = best if best is not None else (plans[0] if plans else None)
+        else:
+            plan = planner.plan(request.start_q, request.goal.xy)
+        return replace(self.time_plan(request, plan), compute_s=time.perf_counter() - started)
+
+
+class BranchRanking:
+    """Which of a goal's elbow branches gets there soonest, judged on the arm alone."""
+
+    def __init__(self, arm: ArmConfig):
+        self.dynamics = ArmDynamics(arm)
+        self.validator = GoalValidator(arm)
+        self.forbidden = self.validator.forbidden
+        self.clear_space = ForbiddenSpace(arm, arm.world.clearance_rad)
+        self.limits = TrajectoryLimits.from_arm(arm)
+
+    def duration_s(self, waypoints) -> float:
+        """The path's duration from rest to rest, timed in full (inf when it cannot be)."""
+        space = self.clear_space if self.clear_space.path_is_free(waypoints) else self.forbidden
+        try:
+            return time_optimal_trajectory(waypoints, self.dynamics, space,
+                                           self.limits).duration_s
+        except TrajectoryError:
+            return math.inf
+
+    def fastest_branch(self, plans):
+        """Of ``plans`` (each with ``waypoints_rad``), the one that gets there soonest: all
+        estimated quickly, those within the margin of the best timed in full."""
+        if len(plans) <= 1:
+            return plans[0] if plans else None
+        estimates = [estimated_duration_s(p.waypoints_rad, self.dynamics, self.limits)
+                     for p in plans]
+        best = min(estimates)
+        timed = [(self.duration_s(p.waypoints_rad), k) for k, (p, estimate)
+                 in enumerate(zip(plans, estimates))
+                 if estimate <= best * (1.0 + BRANCH_SCREEN_MARGIN)]
+        duration, index = min(timed)
+        return plans[index] if math.isfinite(duration) else None
+
+
+class PlanHandoff:
+    """The goal being planned: its request, when it must be answered, and what an answer
+    means for the arm."""
+
+    def __init__(self, planner_timeout_s: float):
+        self.planner_timeout_s = planner_timeout_s
+        self.pending: Optional[PlanRequest] = None
+        self._outbox: list[PlanRequest] = []
+        self._next_id = 1
+        self.started_s, self.deadline_s = math.nan, math.inf
+        self.last: Optional[TimedPlan] = None
+
+    def start(self, now_s: float) -> None:
+        """A goal becomes current: it must have a plan within the planner timeout."""
+        self.started_s, self.deadline_s = now_s, now_s + self.planner_timeout_s
+
+    def ask(self, now_s: float, goal: Goal, start_q, start_velocity_rad_s,
+            start_time_s: Optional[float], lead_s: float) -> None:
+        request = PlanRequest(self._next_id, goal, (float(start_q[0]), float(start_q[1])),
+                              tuple(float(v) for v in start_velocity_rad_s), start_time_s,
+                              now_s, lead_s)
+        self._next_id += 1
+        self.pending, self._outbox = request, [request]
+
+    def take(self) -> list[PlanRequest]:
+        """Requests to send to the planner (each once)."""
+        out, self._outbox = self._outbox, []
+        return out
+
+    def drop(self) -> None:
+        self.pending, self._outbox = None, []
+
+    def overdue(self, now_s: float) -> bool:
+        return self.pending is not None and now_s > self.deadline_s
+
+    def answer(self, now_s: float, timed: TimedPlan, idle_from_s: float):
+        """What ``timed`` means now: ('ignore', None) for an answer to an older request,
+        ('fail', reason), ('retry', lead_s) when it came too late to take over the moving
+        arm but there is time to ask again, or ('take', begin_s). ``idle_from_s``: when the
+        current motion ends (a plan from rest begins then at the earliest)."""
+        request = timed.request
+        if self.pending is None or request.request_id != self.pending.request_id:
+            return 'ignore', None
+        self.pending, self.last = None, timed
+        if not timed.ok:
+            return 'fail', timed.reason
+        if request.start_time_s is None:
+            return 'take', max(now_s, idle_from_s)
+        if now_s <= request.start_time_s:
+            return 'take', request.start_time_s
+        if now_s + 2.0 * request.lead_s > self.deadline_s:
+            return 'fail', (f'the plan for {request.goal.label} came too late to take over '
+                            'the moving arm')
+        return 'retry', 2.0 * request.lead_s

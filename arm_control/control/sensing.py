@@ -1,0 +1,121 @@
+"""The controller's view of the arm: the Kalman estimate, how fresh it is, and whether the arm
+was put somewhere else under it.
+
+Each reading is folded in at the time it was taken: the filter predicts with the voltage the
+motor controllers applied (the command within the current limits and the bus voltage the
+robot reports, as a roboRIO reads its own), updates, then predicts up to now.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from arm_control.config import ArmConfig
+from arm_control.control.estimator import ArmEstimator
+from arm_control.model.dynamics import ArmDynamics
+from arm_control.model.electrical import PowerSupply
+
+# A sensor jump means the arm was put elsewhere only if the potentiometers moved farther
+# between two readings than this many times the motors' free speed allows (plus the margin,
+# for noise); else the arm is falling or pushed, for the tracking-error rule to judge.
+LEAP_SPEED_FACTOR = 3.0
+LEAP_MARGIN_RAD = 0.05
+
+
+@dataclass(frozen=True)
+class SensorReading:
+    """One sample of the arm's sensors (the node builds it from joint_states, motor_encoders
+    and battery_state).
+
+    ``encoder_rad`` may hold NaN when the encoders are missing: the filter skips them.
+    ``sampled_s``: when the sensors took it on their own clock (the message's stamp; only
+    differences are used), NaN if unknown. ``bus_voltage``: NaN when not reported (taken as
+    the battery's nominal volts). ``ArmPlant.read()`` returns an object with these fields
+    but ``sampled_s``.
+    """
+
+    potentiometer_rad: tuple[float, float]
+    velocity_rad_s: tuple[float, float]
+    encoder_rad: tuple[float, float] = (math.nan, math.nan)
+    sampled_s: float = math.nan
+    bus_voltage: float = math.nan
+
+
+class Sensing:
+    """The state estimate [θa, θb, ωa, ωb] and the readings behind it."""
+
+    def __init__(self, arm: ArmConfig, process_noise_rad_s2: float):
+        dynamics = ArmDynamics(arm)
+        self.supply = PowerSupply(arm, dynamics.motors)
+        self.estimator = ArmEstimator(arm, process_noise_rad_s2)
+        self.nominal_voltage = arm.battery.nominal_voltage
+        self.bus_voltage = self.nominal_voltage
+        self.max_leap_speed_rad_s = LEAP_SPEED_FACTOR * float(
+            np.max(dynamics.free_speed_rad_s(self.nominal_voltage)))
+        self.time_s = None                 # of the estimate; None before the first reading
+        self.last_reading_s = -math.inf
+        self.last_potentiometer = None
+        self.last_sampled_s = math.nan
+        self.jumped = False                # the filter re-initialised: the arm is elsewhere
+
+    @property
+    def started(self) -> bool:
+        return self.time_s is not None
+
+    @property
+    def state(self) -> np.ndarray:
+        return self.estimator.state
+
+    def age_s(self, now_s: float) -> float:
+        return now_s - self.last_reading_s
+
+    def _predict(self, command_v, to_s: float) -> None:
+        if to_s > self.time_s:
+            self.estimator.predict(command_v, to_s - self.time_s, self.supply, self.bus_voltage)
+            self.time_s = to_s
+
+    def update(self, now_s: float, reading, reading_time_s, command_v) -> None:
+        """Predict with the command held since the last update up to the reading, update,
+        predict up to now; without a (finite) reading, only predict."""
+        if reading is not None:
+            pot = np.asarray(reading.potentiometer_rad, float).reshape(2)
+            if not np.all(np.isfinite(pot)):
+                reading = None
+        if reading is None:
+            if self.started:
+                self._predict(command_v, now_s)
+            return
+        taken_s = now_s if reading_time_s is None else min(reading_time_s, now_s)
+        velocity = np.asarray(reading.velocity_rad_s, float).reshape(2)
+        encoder = np.asarray(reading.encoder_rad, float).reshape(2)
+        sampled_s = float(getattr(reading, 'sampled_s', math.nan))
+        bus = float(getattr(reading, 'bus_voltage', math.nan))
+        leapt = self._leapt(pot, taken_s, sampled_s)
+        self.last_reading_s, self.last_sampled_s, self.last_potentiometer = \
+            taken_s, sampled_s, pot
+        if not self.started:
+            self.estimator.reset(pot, np.where(np.isfinite(encoder), encoder, 0.0))
+            self.time_s = taken_s
+        else:
+            self._predict(command_v, taken_s)
+            resets = self.estimator.jump_count
+            self.estimator.update(pot, velocity, encoder)
+            self.jumped |= self.estimator.jump_count > resets and leapt
+        if math.isfinite(bus) and bus > 0.0:
+            self.bus_voltage = bus
+        self._predict(command_v, now_s)
+
+    def _leapt(self, pot, taken_s: float, sampled_s: float) -> bool:
+        """The potentiometers moved farther since the last reading than the arm can move: it
+        was put somewhere (the sim reset or restarted), not driven or dropped there.
+
+        The interval is the longer of arrival and sampling: readings delayed and delivered
+        together (a loaded machine) arrive close but were taken far apart."""
+        if self.last_potentiometer is None:
+            return True
+        interval_s = max(taken_s - self.last_reading_s, 0.0)
+        if math.isfinite(sampled_s - self.last_sampled_s):
+            interval_s = max(interval_s, sampled_s - self.last_sampled_s)
+        step = float(np.max(np.abs(pot - self.last_potentiometer)))
+        return step > self.max_leap_speed_rad_s * interval_s + LEAP_MARGIN_RAD

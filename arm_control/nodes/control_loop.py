@@ -1,0 +1,58 @@
+"""The control loop's beat: ``tick`` once per period on the node's clock, in a thread of its
+own, so that no callback, burst of messages or graph change in the node's executor delays a
+command. A plan that becomes ready wakes it at once (``poke``): the motion starts then, not at
+the next period, and the periods run on from there."""
+
+import threading
+
+from rclpy.clock import ClockType
+
+# With simulated time the clock only moves when /clock does: look this often (wall s).
+SIM_TIME_POLL_S = 0.001
+
+
+class ControlLoop:
+    """Calls ``tick()`` every ``period_s`` of ``clock`` time, and at once when poked."""
+
+    def __init__(self, clock, period_s: float, tick):
+        self.clock, self.period_s, self.tick = clock, period_s, tick
+        self._wake = threading.Event()
+        self._stopping = False
+        self._thread = threading.Thread(target=self._run, daemon=True, name='control loop')
+
+    def now_s(self) -> float:
+        return self.clock.now().nanoseconds * 1e-9
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def poke(self) -> None:
+        """Tick now, and count the periods on from here."""
+        self._wake.set()
+
+    def stop(self) -> None:
+        self._stopping = True
+        self._wake.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(1.0)
+
+    def _simulated(self) -> bool:
+        return self.clock.clock_type == ClockType.ROS_TIME and self.clock.ros_time_is_active
+
+    def _run(self) -> None:
+        due_s = self.now_s()
+        while not self._stopping:
+            now = self.now_s()
+            poked = self._wake.is_set()
+            if poked or now >= due_s:
+                self._wake.clear()
+                if self._stopping:
+                    return
+                self.tick()
+                # On time: keep the phase. Poked, or a whole period late: a new phase.
+                due_s = (now if poked or now > due_s + self.period_s else due_s) + self.period_s
+                continue
+            wait_s = due_s - now
+            if self._simulated():
+                wait_s = min(wait_s, SIM_TIME_POLL_S)
+            self._wake.wait(wait_s)
