@@ -29,6 +29,7 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 from arm_control import config
+from arm_control.control.events import parse_event
 from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED
 
 START_Q = np.array(config.load('sim')[1].initial_position)
@@ -37,16 +38,17 @@ DEG = math.pi / 180.0
 # with COMMANDS' depth of 10 loses some to overwriting when the subscriber falls behind).
 FLOOD_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
-# Bad goals of every kind, each with words its rejection must contain.
+# Bad goals of every kind, each with the cause its rejection must give.
 BAD_GOALS = [
-    (dict(x=math.nan, y=1.0), 'not a finite number'),
-    (dict(x=1.0, y=math.inf), 'not a finite number'),
-    (dict(x=-math.inf, y=1.0, z=math.nan), 'not a finite number'),
+    (dict(x=math.nan, y=1.0), 'not finite'),
+    (dict(x=1.0, y=math.inf), 'not finite'),
+    (dict(x=-math.inf, y=1.0, z=math.nan), 'not finite'),
     (dict(x=1e300, y=-1e300), 'out of reach'),
-    (dict(x=1.0, y=1.0, frame='map'), "frame 'map'"),
-    (dict(x=1.0, y=1.0, z=0.05), 'z = 0.0500 m'),
+    (dict(x=1.0, y=1.0, frame='map'), 'wrong frame'),
+    (dict(x=1.0, y=1.0, z=0.05), 'off the plane'),
     (dict(x=3.0, y=0.0), 'out of reach'),
-    (dict(x=1.0, y=-0.5), 'forbidden space'),
+    (dict(x=1.0, y=-0.5), 'forbidden'),
+    (dict(x=1.8, y=0.0), 'forbidden'),
 ]
 
 
@@ -196,16 +198,18 @@ class ArmRig:
         return self.spin_until(lambda: self.state == state and self.states[-1][0] >= since_s
                                if since_s > -math.inf else self.state == state, timeout_s)
 
-    def said(self, words: str, since_s=-math.inf) -> list:
-        return [m.data for m in self.events.messages(since_s) if words in m.data]
+    def said(self, kind: str, since_s=-math.inf) -> list:
+        """The events of ``kind`` since ``since_s``, as (kind, cause, sentence)."""
+        parsed = [parse_event(m.data) for m in self.events.messages(since_s)]
+        return [event for event in parsed if event[0] == kind]
 
-    def wait_said(self, words: str, timeout_s: float = 10.0, since_s=-math.inf,
+    def wait_said(self, kind: str, timeout_s: float = 10.0, since_s=-math.inf,
                   count: int = 1) -> bool:
-        return self.spin_until(lambda: len(self.said(words, since_s)) >= count, timeout_s)
+        return self.spin_until(lambda: len(self.said(kind, since_s)) >= count, timeout_s)
 
-    def said_at(self, words: str, since_s=-math.inf) -> float:
-        """When the first event with ``words`` since ``since_s`` was heard."""
-        return min(t for t, m in self.events if t >= since_s and words in m.data)
+    def said_at(self, kind: str, since_s=-math.inf) -> float:
+        """When the first event of ``kind`` since ``since_s`` was heard."""
+        return min(t for t, m in self.events if t >= since_s and parse_event(m.data)[0] == kind)
 
     def event_log(self, since_s=-math.inf) -> list:
         return [m.data for m in self.events.messages(since_s)]

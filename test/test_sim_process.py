@@ -4,7 +4,7 @@ import math
 import time
 
 import pytest
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
@@ -59,7 +59,7 @@ def test_malformed_commands_do_not_stop_it(launch, probe):
     probe.spin_for(1.0)
     assert sim.alive()
     assert len(states) > count + 20
-    assert 'rejected voltage_command' in sim.output()
+    assert 'rejected a voltage_command' in sim.output()
     assert all(math.isfinite(p) for m in truth[-10:] for p in m.position)
 
 
@@ -78,3 +78,39 @@ def test_voltage_drives_the_arm_and_reset_restores_it(launch, probe):
     after_reset = len(truth)
     wait_for_messages(probe, truth, after_reset + 1)
     assert truth[after_reset].position[1] == pytest.approx(-1.5708, abs=0.03)
+
+
+def test_set_state_maps_positions_by_joint_name_and_refuses_unknown_names(launch, probe):
+    sim = launch('sim', '-p', 'initial_position:=[1.0, -1.0]')
+    truth = probe.collect(JointState, '/sim/ground_truth')
+    wait_for_messages(probe, truth, 1)
+    publisher = probe.node.create_publisher(JointState, '/sim/set_state', 10)
+    probe.spin_until(lambda: publisher.get_subscription_count() > 0, 10.0)
+    publisher.publish(JointState(name=['elbow', 'shoulder'], position=[-0.5, 1.2]))
+    assert probe.spin_until(lambda: truth[-1].position[0] == pytest.approx(1.2, abs=1e-6), 5.0)
+    assert truth[-1].position[1] == pytest.approx(-0.5, abs=1e-6)       # by name, not order
+    publisher.publish(JointState(name=['shoulder', 'wrist'], position=[0.3, 0.3]))
+    probe.spin_for(0.5)
+    assert truth[-1].position[0] == pytest.approx(1.2, abs=1e-6)        # refused: unchanged
+    assert 'rejected set_state' in sim.output()
+
+
+def test_battery_and_motor_currents_follow_the_load(launch, probe):
+    """At rest the bus is at the battery's 12 V and no current flows; full voltage on both
+    joints from rest draws the current limits and sags the bus (BatteryState's sign: the
+    current is negative while the battery discharges)."""
+    launch('sim', '-p', 'initial_position:=[0.0, 0.0]')
+    battery = probe.collect(BatteryState, '/battery_state')
+    currents = probe.collect(Float64MultiArray, '/motor_currents')
+    wait_for_messages(probe, battery, 2)
+    assert battery[-1].voltage == pytest.approx(12.0) and battery[-1].current == 0.0
+    publisher = probe.node.create_publisher(Float64MultiArray, '/voltage_command', 10)
+    probe.spin_until(lambda: publisher.get_subscription_count() > 0, 10.0)
+    began = len(battery)
+    for _ in range(5):
+        publisher.publish(Float64MultiArray(data=[12.0, 12.0]))
+        probe.spin_for(0.02)
+    drawn = battery[began:]
+    assert drawn and min(m.voltage for m in drawn) < 10.5
+    assert min(m.current for m in drawn) < -20.0
+    assert max(abs(m.data[1]) for m in currents[began:]) <= 80.0 + 1e-6

@@ -196,7 +196,7 @@ def check(goal=(1.1, 0.9)) -> dict:
     # controller says it has it.
 
     def answers():
-        return [e for e in events if e.startswith('goal (')]
+        return [e for e in events if e.startswith(('goal_queued', 'goal_rejected'))]
     for _ in range(5):
         heard = len(answers())
         goals.publish(message)
@@ -205,7 +205,7 @@ def check(goal=(1.1, 0.9)) -> dict:
             rclpy.spin_once(node, timeout_sec=0.05)
         if len(answers()) > heard:
             break
-    reached = spin_until(lambda: any(e.startswith('reached') for e in events))
+    reached = spin_until(lambda: any(e.startswith('goal_reached') for e in events))
     end = time.monotonic() + 0.5
     while time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)

@@ -57,7 +57,16 @@ class Event:
     cause: str = ''     # a few words to count and test by ('out of reach', 'queue full', ...)
 
     def __str__(self) -> str:
-        return f'{self.kind}: {self.message}'
+        """As published: 'kind: sentence', or 'kind (cause): sentence'."""
+        cause = f' ({self.cause})' if self.cause else ''
+        return f'{self.kind}{cause}: {self.message}'
+
+
+def parse_event(text: str) -> tuple[str, str, str]:
+    """(kind, cause, sentence) of an event as published (``str(event)``)."""
+    head, _, message = text.partition(': ')
+    kind, _, cause = head.partition(' (')
+    return kind, cause.rstrip(')'), message
 
 
 def quote(text: str, limit: int = QUOTE_CHARS) -> str:

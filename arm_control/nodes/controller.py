@@ -276,11 +276,11 @@ class ControllerNode(Node):
             self.events_pub.publish(String(data=str(event)))
             # rclpy ties a severity to its call site: one call per level.
             if event.level == 'info':
-                log.info(event.message)
+                log.info(str(event))
             elif event.level == 'warning':
-                log.warning(event.message)
+                log.warning(str(event))
             else:
-                log.error(event.message)
+                log.error(str(event))
         if state != self.last_state:
             self.last_state = state
             self.state_pub.publish(String(data=str(state)))
