@@ -758,3 +758,21 @@ def test_the_controller_takes_each_transition(arm, controller_config, planner, s
     rig = bring_to(state, arm, controller_config, planner)
     take(trigger, rig, planner)
     assert (state, trigger, TRANSITIONS[(state, trigger)]) in rig.core.machine.history
+
+
+def test_new_gains_act_from_the_next_period(arm, controller_config):
+    """Run-time tuning: two cores see the same readings; one has its proportional gain
+    doubled before the third period. Its feedback then differs by exactly kp·e."""
+    kp, ki, kd = controller_config.shoulder_pid
+    cores = [ArmController(arm, controller_config) for _ in range(2)]
+    readings = [reading_at(START), reading_at((START[0] - 0.02, START[1]))] * 2
+    for k, reading in enumerate(readings[:2]):
+        for core in cores:
+            core.step(0.02 * k, reading)
+    cores[1].retune(arm, dataclasses.replace(controller_config, shoulder_pid=(2 * kp, ki, kd)))
+    for core in cores:
+        core.step(0.04, readings[2])
+    error = cores[0].tracking_error_rad[0]
+    assert abs(error) > 0.003
+    assert cores[1].feedback_v[0] - cores[0].feedback_v[0] == pytest.approx(kp * error,
+                                                                           rel=1e-6)

@@ -212,3 +212,44 @@ def test_frc_robot_every_move_planned_with_zero_contact(launch, probe, frc_robot
     assert not np.any(contact), (f'{np.sum(contact)} samples in forbidden space, first: '
                                  f'{bodies.why_forbidden(q[contact][0])}')
     assert not any('failed' in e.data for e in events)
+
+
+def set_parameter(probe, name, value):
+    """``ros2 param set /controller name value``: the service's result (successful, reason)."""
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+    request = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
+    return probe.call(SetParameters, '/controller/set_parameters', request).results[0]
+
+
+def get_parameter(probe, name):
+    from rcl_interfaces.srv import GetParameters
+    from rclpy.parameter import parameter_value_to_python
+    response = probe.call(GetParameters, '/controller/get_parameters',
+                          GetParameters.Request(names=[name]))
+    return parameter_value_to_python(response.values[0])
+
+
+def test_live_tuning_takes_good_values_and_refuses_bad_ones(launch, probe):
+    """Gains, reserves, tolerances, dwell and presets change at run time; a bad value is
+    refused with the reason and the old one kept; the arm's physics stay read-only."""
+    truth, states, events = start_arm(launch, probe)
+    result = set_parameter(probe, 'shoulder_pid', [70.0, 8.0, 3.5])
+    assert result.successful, result.reason
+    assert get_parameter(probe, 'shoulder_pid') == [70.0, 8.0, 3.5]
+    assert probe.spin_until(lambda: said(events, 'parameters'), 5.0)
+    result = set_parameter(probe, 'elbow_pid', [-1.0, 0.0, 0.0])
+    assert not result.successful and "'elbow_pid'" in result.reason
+    assert get_parameter(probe, 'elbow_pid') == [75.0, 10.0, 3.0]            # kept
+    result = set_parameter(probe, 'feedback_voltage_reserve', 13.0)
+    assert not result.successful and 'feedback_voltage_reserve' in result.reason
+    assert not set_parameter(probe, 'shoulder.mass_kg', 50.0).successful    # read-only
+    # A preset moved at run time is where the next press of its button goes.
+    assert set_parameter(probe, 'presets.high_score', [0.6, 1.6]).successful
+    presets = probe.node.create_publisher(String, '/goal_preset', COMMANDS)
+    assert probe.spin_until(lambda: presets.get_subscription_count() > 0, 10.0)
+    presets.publish(String(data='high_score'))
+    assert probe.spin_until(lambda: len(reached(events)) == 1, SETTLE_TIMEOUT_S)
+    probe.spin_for(0.3)
+    q, qd, xy = tool_track(config.load('sim')[0], truth)
+    assert np.linalg.norm(xy[-1] - (0.6, 1.6)) < 0.031

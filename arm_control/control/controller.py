@@ -52,14 +52,7 @@ class ArmController:
         self.plan_timer = PlanTimer(arm, config)
         dynamics, self.forbidden = self.plan_timer.dynamics, self.plan_timer.forbidden
         self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
-        # Braking, holds and driver mode count on what the motors surely give in any pose:
-        # no more than the free speed, and the least favourable free pose's acceleration.
-        volts = min(TrajectoryLimits.from_config(arm, config).budget)
-        self.max_velocity = np.minimum(config.max_velocity_rad_s,
-                                       dynamics.free_speed_rad_s(volts))
-        self.max_acceleration = np.minimum(
-            config.max_acceleration_rad_s2,
-            sure_acceleration_rad_s2(dynamics, self.forbidden, volts))
+        self.max_velocity, self.max_acceleration = self._sure_limits(dynamics)
         self.sensing = Sensing(arm, config.process_noise_rad_s2)
         self.pid = ArmPid.from_config(config)
         self.feedforward = PeriodFeedforward(dynamics, self.period_s,
@@ -81,6 +74,27 @@ class ArmController:
         self.setpoint = (np.zeros(2), np.zeros(2), np.zeros(2))
         self.tracking_error_rad = np.zeros(2)
         self.estop_error, self.estops = '', 0
+
+    def _sure_limits(self, dynamics):
+        """Braking, holds and driver mode count on what the motors surely give in any pose:
+        no more than the free speed, and the least favourable free pose's acceleration,
+        within the trajectory's volts (the battery less the reserves)."""
+        config = self.config
+        volts = min(TrajectoryLimits.from_config(self.arm, config).budget)
+        return (np.minimum(config.max_velocity_rad_s, dynamics.free_speed_rad_s(volts)),
+                np.minimum(config.max_acceleration_rad_s2,
+                           sure_acceleration_rad_s2(dynamics, self.forbidden, volts)))
+
+    def retune(self, arm: ArmConfig, config: ControllerConfig) -> None:
+        """Settings changed at run time, already validated: gains, reserves, tolerances,
+        dwell, presets. They act from the next period; the arm's physics are unchanged."""
+        self.arm, self.config = arm, config
+        self.goals.arm, self.goals.config = arm, config
+        self.safety.config = config
+        self.pid.retune(config)
+        self.plan_timer = PlanTimer(arm, config)
+        limits = self._sure_limits(self.plan_timer.dynamics)
+        self.max_velocity[:], self.max_acceleration[:] = limits     # shared with the others
 
     @property
     def state(self) -> S:

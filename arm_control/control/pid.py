@@ -69,6 +69,16 @@ class ArmPid:
                    PidGains.from_triple(controller_config.elbow_pid),
                    controller_config.integrator_limit_v)
 
+    def retune(self, controller_config) -> None:
+        """New gains and integrator limit from the next update on; the integrals are kept
+        (within the new limit), so a change does not kick the arm."""
+        for joint, triple in zip(self.joints, (controller_config.shoulder_pid,
+                                               controller_config.elbow_pid)):
+            joint.gains = PidGains.from_triple(triple)
+            joint.integrator_limit_v = float(controller_config.integrator_limit_v)
+            limit = joint.integrator_limit_v
+            joint.integral_v = min(max(joint.integral_v, -limit), limit)
+
     def reset(self) -> None:
         for joint in self.joints:
             joint.reset()

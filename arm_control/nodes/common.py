@@ -38,12 +38,15 @@ PLANNER_AVAILABLE = 'planner available'
 _NAMED_BY_LIST = (('world.forbidden_regions', 'world.regions.'), ('presets.names', 'presets.'))
 
 
-def declare_parameters(node, node_name: str) -> dict:
+def declare_parameters(node, node_name: str, tunable=(), on_change=None) -> dict:
     """Declare every parameter of ``node_name`` with its default and description from
     the installed ``config/arm.yaml``; return ``{name: value}`` after any overrides.
 
     Types are checked by ``arm_control.config``, which names the parameter on failure,
-    so the descriptors allow any type (a 30 for a 30.0 is not an error).
+    so the descriptors allow any type (a 30 for a 30.0 is not an error). Parameters named
+    in ``tunable`` (a name, or a prefix ending in '.') may change at run time: each change
+    is offered to ``on_change(parameters)`` -- every parameter, the new values in -- which
+    returns None to take it or the reason to refuse it; the rest are read-only.
     """
     path = default_parameter_file()
     defaults = read_parameter_file(path, node_name)
@@ -51,8 +54,9 @@ def declare_parameters(node, node_name: str) -> dict:
     declared = []
 
     def declare(name, value):
+        live = any(name == t or (t.endswith('.') and name.startswith(t)) for t in tunable)
         node.declare_parameter(name, value, ParameterDescriptor(
-            description=descriptions.get(name, ''), dynamic_typing=True, read_only=True))
+            description=descriptions.get(name, ''), dynamic_typing=True, read_only=not live))
         declared.append(name)
 
     for name, value in defaults.items():
@@ -62,8 +66,16 @@ def declare_parameters(node, node_name: str) -> dict:
             for item in node.get_parameter(list_name).value or ():
                 if isinstance(item, str) and not node.has_parameter(prefix + item):
                     declare(prefix + item, None)
-    node.add_on_set_parameters_callback(lambda params: SetParametersResult(
-        successful=False, reason='parameters are read once at start; restart the node'))
+
+    def offered(changes) -> SetParametersResult:
+        if on_change is None:
+            return SetParametersResult(
+                successful=False, reason='parameters are read once at start; restart the node')
+        values = {name: node.get_parameter(name).value for name in declared}
+        values.update({change.name: change.value for change in changes})
+        reason = on_change(values)
+        return SetParametersResult(successful=reason is None, reason=reason or '')
+    node.add_on_set_parameters_callback(offered)
     return {name: node.get_parameter(name).value for name in declared}
 
 

@@ -34,6 +34,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.controller import ArmController
+from arm_control.control.events import EventKind as Kind
 from arm_control.control.plans import PathPlan, TimedPlan
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
@@ -43,9 +44,15 @@ from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, LAT
                                       status)
 from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.plan_worker import PlanWorker
+from arm_control.parameters import ParameterError
 from arm_control.planning.planner import waypoints_from_poses
 
 SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V command to arrive
+# What may change at run time (``ros2 param set``): gains, reserves, tolerances, dwell and the
+# presets. The arm's physics, its world and the loop's rate are read once.
+TUNABLE = ('shoulder_pid', 'elbow_pid', 'integrator_limit_v', 'feedback_voltage_reserve',
+           'driving_voltage_reserve', 'goal_tolerance_rad', 'settled_velocity_rad_s',
+           'dwell_s', 'presets.')
 # Goals are kept until taken: a burst (a script, a flood) is answered, not dropped.
 GOALS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 EVENTS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -55,7 +62,8 @@ class ControllerNode(Node):
 
     def __init__(self):
         super().__init__('controller')
-        params = declare_parameters(self, 'controller')
+        self.core = None
+        params = declare_parameters(self, 'controller', TUNABLE, self.on_parameters)
         self.arm = ArmConfig.from_parameters(params)
         self.config = ControllerConfig.from_parameters(params)
         self.config.check_against(self.arm)
@@ -187,6 +195,29 @@ class ControllerNode(Node):
     def on_enable(self, request, response):
         response.success, response.message = self.command(self.core.enable, bool(request.data))
         return response
+
+    def on_parameters(self, params):
+        """A run-time change: validated whole, taken from the next period, or refused with
+        the reason (the old values kept)."""
+        if self.core is None:
+            return None                             # the overrides at start: read below
+        try:
+            arm = ArmConfig.from_parameters(params)
+            config = ControllerConfig.from_parameters(params)
+            config.check_against(arm)
+        except ParameterError as error:
+            return str(error)
+        changed = [name for name in TUNABLE if getattr(config, name, None) !=
+                   getattr(self.config, name, None)] + (
+            ['presets'] if arm.presets != self.arm.presets else [])
+        self.worker.retune(arm, config)
+        with self.lock:
+            self.core.retune(arm, config)
+            self.core.events.say(self.now_s(), Kind.PARAMETERS, 'info',
+                                 f'changed at run time: {", ".join(changed) or "nothing"}')
+        self.arm, self.config = arm, config
+        self.outputs.trigger()
+        return None
 
     def warn_bad(self, message: str) -> None:
         self.bad_inputs += 1

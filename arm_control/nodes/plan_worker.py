@@ -10,6 +10,7 @@ with the node: its end of the pipe closes when the node's process goes.
 import multiprocessing
 import threading
 
+from arm_control.config import ArmConfig
 from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
 
 
@@ -24,6 +25,9 @@ def _serve(arm, config, requests, results) -> None:
             return
         if item is None:
             return
+        if isinstance(item[0], ArmConfig):             # settings changed at run time
+            timer = PlanTimer(*item)
+            continue
         request, plan = item
         try:
             timed = timer.time_plan(request, plan)
@@ -54,6 +58,11 @@ class PlanWorker:
     def submit(self, request: PlanRequest, plan: PathPlan) -> None:
         with self._send_lock:
             self._requests.send((request, plan))
+
+    def retune(self, arm, config) -> None:
+        """Time the plans that come after this with these settings."""
+        with self._send_lock:
+            self._requests.send((arm, config))
 
     def _receive(self) -> None:
         while True:
