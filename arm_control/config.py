@@ -399,9 +399,30 @@ class PlannerConfig:
         )
 
 
+@dataclass(frozen=True)
+class RecorderConfig:
+    """Where the recorder writes its bag, and how often it flushes it."""
+
+    output_dir: str
+    flush_period_s: float
+
+    @classmethod
+    def from_parameters(cls, params: Mapping[str, Any]) -> 'RecorderConfig':
+        read = _Reader(params)
+        output_dir = read._raw('output_dir')
+        if not isinstance(output_dir, str):
+            raise ParameterError(f"parameter 'output_dir' = {output_dir!r}: expected a "
+                                 'directory name, or empty for one named by the time')
+        return cls(output_dir=output_dir, flush_period_s=read.positive('flush_period_s'))
+
+
+# The nodes whose settings have a class here: checked before a launch starts any node.
+NODE_CONFIGS = {'sim': SimConfig, 'controller': ControllerConfig, 'planner': PlannerConfig,
+                'recorder': RecorderConfig}
+
+
 def load(node_name: str, path=None):
     """``(ArmConfig, <node's config>)`` from a parameter file, for tests and benchmarks."""
     params = read_parameter_file(path or default_parameter_file(), node_name)
-    node_config = {'sim': SimConfig, 'controller': ControllerConfig,
-                   'planner': PlannerConfig}[node_name]
+    node_config = NODE_CONFIGS[node_name]
     return ArmConfig.from_parameters(params), node_config.from_parameters(params)

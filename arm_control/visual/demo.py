@@ -9,8 +9,8 @@ as a ``Sample`` (for ``plots.plot_run``) and as a ``Scene`` (for the viewer's pi
     python -m arm_control.visual.demo docs/ --params config/frc_robot.yaml --name frc_robot
 
 writes ``<name>_viewer.png`` (the viewer mid-way through the longest move, path and goals
-shown) and ``<name>_run.png`` (angles and setpoints, tracking error, voltage, states) --
-with ``--recording`` also ``<name>_run.npz`` for ``plot_run`` -- and prints the goals.
+shown) and ``<name>_run.png`` (angles and setpoints, tracking error, voltage, states), and
+prints the goals.
 """
 
 import argparse
@@ -124,18 +124,13 @@ def main(argv=None) -> int:
     parser.add_argument('--name', default='default', help='prefix of the files written')
     parser.add_argument('--goals', nargs='*', default=None, help='presets, in order')
     parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--recording', action='store_true',
-                        help='also write <name>_run.npz, for plot_run')
     args = parser.parse_args(argv)
     params_file = args.params or config.default_parameter_file()
     run = closed_loop_run(params_file, args.goals, seed=args.seed)
     args.output.mkdir(parents=True, exist_ok=True)
     arm = config.load('sim', params_file)[0]
     SceneView(arm).render_png(telling_frame(run), args.output / f'{args.name}_viewer.png')
-    recording = Recording.from_samples(run.samples)
-    if args.recording:
-        recording.save(args.output / f'{args.name}_run.npz')
-    plot_run(recording, args.output / f'{args.name}_run.png',
+    plot_run(Recording.from_samples(run.samples), args.output / f'{args.name}_run.png',
              title=f'{Path(params_file).name}: {" → ".join(g[0] for g in run.goals)}',
              max_voltage=arm.max_voltage)
     print(f'{"goal":<14} {"x (m)":>6} {"y (m)":>6} {"reached at (s)":>15}')
@@ -144,8 +139,7 @@ def main(argv=None) -> int:
     for event in run.events:
         if event.level != 'info':
             print(f'{event.time_s:7.2f} s {event.level}: {event.message}')
-    print(f'wrote {args.name}_viewer.png, {args.name}_run.png'
-          f'{f", {args.name}_run.npz" if args.recording else ""} in {args.output}')
+    print(f'wrote {args.name}_viewer.png, {args.name}_run.png in {args.output}')
     return 0
 
 
