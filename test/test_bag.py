@@ -256,3 +256,20 @@ def test_plot_run_names_what_it_cannot_read(tmp_path, capsys):
     write_run(tmp_path / 'arm1', namespace='/arm1')
     assert plot_run_main([str(tmp_path / 'arm1'), '--namespace', '/arm2']) == 1
     assert 'holds no joint_states' in capsys.readouterr().err
+
+
+def test_a_bag_whose_recorder_was_killed_is_read_up_to_its_last_flush(tmp_path):
+    """No summary, no footer: what was flushed is still a run."""
+    bag = BagWriter(tmp_path / 'killed')
+    bag.add_topic('/voltage_command', 'std_msgs/msg/Float64MultiArray')
+    for k in range(10):
+        bag.write('/voltage_command', float_array([1.0, float(k)]), EPOCH_NS + k)
+    bag.flush()
+    bag.write('/voltage_command', float_array([1.0, 10.0]), EPOCH_NS + 10)   # not flushed
+    cut = (tmp_path / 'killed' / 'killed_0.mcap').read_bytes()
+    bag.close()
+    (tmp_path / 'killed' / 'killed_0.mcap').write_bytes(cut)
+    recording, notes = load_run(tmp_path / 'killed')
+    assert recording.arrays('voltage')['value'][:, 1].tolist() == [float(k) for k in range(10)]
+    assert notes == [f"{tmp_path / 'killed' / 'killed_0.mcap'} ends early (its recorder never "
+                     'closed it): read the 10 messages before the end']

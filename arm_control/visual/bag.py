@@ -22,7 +22,8 @@ from pathlib import Path
 import re
 import sys
 
-from mcap.reader import make_reader
+from mcap.exceptions import McapError
+from mcap.reader import make_reader, NonSeekingReader
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
 from mcap_ros2.decoder import DecoderFactory
@@ -261,18 +262,40 @@ def _joint_pair(names, values) -> list[float] | None:
     return [float(values[0]), float(values[1])]
 
 
+def _decoded_messages(file: Path) -> tuple[list, bool]:
+    """([(topic, log time ns, message)], whether the file was whole). A file whose recorder
+    was killed has no summary: it is read from the start up to where it stops."""
+    with open(file, 'rb') as stream:
+        try:
+            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+            return [(channel.topic, message.log_time, decoded)
+                    for _, channel, message, decoded in reader.iter_decoded_messages()], True
+        except McapError:
+            stream.seek(0)
+        messages = []
+        reader = NonSeekingReader(stream, decoder_factories=[DecoderFactory()])
+        try:
+            for _, channel, message, decoded in reader.iter_decoded_messages(
+                    log_time_order=False):
+                messages.append((channel.topic, message.log_time, decoded))
+        except McapError:
+            pass
+        return messages, False
+
+
 def load_run(path, namespace: str | None = None) -> tuple[Recording, list[str]]:
     """The arm's run in a bag, read through mcap_ros2's decoder: (recording, notes on what
     was skipped). ``namespace`` picks the arm when the bag holds several ('/arm1')."""
-    messages = []
+    messages, notes = [], []
     for file in mcap_files(path):
         try:
-            with open(file, 'rb') as stream:
-                reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-                messages += [(channel.topic, message.log_time, decoded)
-                             for _, channel, message, decoded in reader.iter_decoded_messages()]
+            file_messages, complete = _decoded_messages(file)
         except OSError as error:
             raise BagError(f'cannot read {file}: {error}') from error
+        messages += file_messages
+        if not complete:
+            notes.append(f'{file} ends early (its recorder never closed it): '
+                         f'read the {len(file_messages)} messages before the end')
     topics = {topic for topic, _, _ in messages}
     if namespace is None:
         arms = sorted({t[:-len('/joint_states')] for t in topics
@@ -304,6 +327,6 @@ def load_run(path, namespace: str | None = None) -> tuple[Recording, list[str]]:
             recording.add_voltage(time_s, msg.data)
         elif topic == f'{namespace}/arm_state':
             recording.add_state(time_s, msg.data)
-    notes = [f'{count} {topic} messages skipped: not [shoulder, elbow] as finite numbers'
-             for topic, count in sorted(skipped.items())]
+    notes += [f'{count} {topic} messages skipped: not [shoulder, elbow] as finite numbers'
+              for topic, count in sorted(skipped.items())]
     return recording, notes
