@@ -6,7 +6,6 @@ import time
 from geometry_msgs.msg import PointStamped
 from matplotlib import image
 import numpy as np
-import pytest
 from rclpy.qos import qos_profile_sensor_data
 from rosbags.interfaces import QosDurability
 from rosbags.rosbag2 import Reader
@@ -132,7 +131,10 @@ def test_recorder_writes_a_bag_that_rosbags_reads(launch, probe, tmp_path):
         assert connections['/joint_states'].msgcount > 20
         assert connections['/sim/ground_truth'].msgcount > 20
         assert connections['/voltage_command'].msgcount == 25
-        assert connections['/battery_state'].msgcount == 25
+        # the electrical topics are recorded best effort (either kind of publisher matches):
+        # a sample may be lost on a loaded machine, never invented or reordered
+        assert connections['/battery_state'].msgcount >= 20
+        assert connections['/motor_currents'].msgcount >= 20
         assert connections['/arm_state'].msgcount == 1
         (latched,) = connections['/arm_state'].ext.offered_qos_profiles
         assert latched.durability == QosDurability.TRANSIENT_LOCAL
@@ -147,9 +149,11 @@ def test_recorder_writes_a_bag_that_rosbags_reads(launch, probe, tmp_path):
     assert start_ns - 30e9 < times[0] and times[-1] < end_ns      # receive times, in ns
     assert times == sorted(times)
     assert [list(m.data) for m in received['/voltage_command']] == [[1.5, -0.5]] * 25
-    assert [m.voltage for m in received['/battery_state']] == pytest.approx(
-        [12.0 - 0.01 * k for k in range(25)])
-    assert [m.data[0] for m in received['/motor_currents']] == [float(k) for k in range(25)]
+    steps = [round(100 * (12.0 - m.voltage)) for m in received['/battery_state']]
+    assert steps == sorted(set(steps)) and set(steps) <= set(range(25))
+    assert all(m.current == -20.0 for m in received['/battery_state'])
+    steps = [m.data[0] for m in received['/motor_currents']]
+    assert steps == sorted(set(steps)) and set(steps) <= {float(k) for k in range(25)}
     assert received['/arm_state'][0].data == 'waiting'
     assert list(received['/joint_states'][0].name) == ['shoulder', 'elbow']
 
