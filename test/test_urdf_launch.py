@@ -10,6 +10,7 @@ import importlib.util
 import math
 from pathlib import Path
 import sys
+import tempfile
 import types
 from xml.etree import ElementTree
 
@@ -282,7 +283,9 @@ def test_a_missing_parameter_file_starts_no_node(launch_description, tmp_path):
     assert not [a for a in Recorded.built if type(a).__name__ == 'Node']
 
 
-def test_a_namespace_moves_every_node_and_its_parameter_sections(launch_description, tmp_path):
+def test_a_namespace_moves_every_node_and_its_parameter_sections(
+        launch_description, tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, 'tempdir', str(tmp_path))     # where the copies go
     robot = tmp_path / 'robot.yaml'
     robot.write_text('/controller:\n  ros__parameters:\n    shoulder_pid: [60.0, 10.0, 4.0]\n')
     (group,) = bring_up(launch_description, namespace='arm1', robot_params_file=str(robot))
@@ -293,6 +296,7 @@ def test_a_namespace_moves_every_node_and_its_parameter_sections(launch_descript
     assert len(arm_nodes) == 6
     files = arm_nodes[0].kwargs['parameters']
     assert all(n.kwargs['parameters'] == files for n in arm_nodes) and len(files) == 2
+    assert all(Path(f).is_relative_to(tmp_path) for f in files)
     # the node in /arm1 gets from the copies what /controller got from the originals
     for node_name in ('controller', 'sim', 'planner'):
         moved, _ = node_parameters(files, f'arm1/{node_name}')
