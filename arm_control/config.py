@@ -327,7 +327,26 @@ class PlannerConfig:
         return cls(grid_resolution_rad=read.number('grid_resolution_rad', low=0.001, high=0.2))
 
 
-NODE_CONFIGS = {'sim': SimConfig, 'controller': ControllerConfig, 'planner': PlannerConfig}
+@dataclass(frozen=True)
+class RecorderConfig:
+    """Where the recorder writes its bag, and how often it flushes it."""
+
+    output_dir: str
+    flush_period_s: float
+
+    @classmethod
+    def from_parameters(cls, params: Mapping[str, Any]) -> 'RecorderConfig':
+        read = Reader(params)
+        output_dir = read.params.get('output_dir')
+        if not isinstance(output_dir, str):
+            raise ParameterError(f"parameter 'output_dir' = {output_dir!r}: expected a "
+                                 'directory name, or empty for one named by the time')
+        return cls(output_dir=output_dir, flush_period_s=read.positive('flush_period_s'))
+
+
+# The nodes whose settings have a class here: checked before a launch starts any node.
+NODE_CONFIGS = {'sim': SimConfig, 'controller': ControllerConfig, 'planner': PlannerConfig,
+                'recorder': RecorderConfig}
 
 
 def load(node_name: str, *paths):

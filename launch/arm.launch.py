@@ -1,43 +1,72 @@
-"""Start the arm: sim, controller and planner, all reading one parameter file.
+"""Start the arm: sim, controller and planner, all reading the same parameter files.
 
     ros2 launch arm_control arm.launch.py
     ros2 launch arm_control arm.launch.py params_file:=/path/to/frc_robot.yaml viewer:=true
+    ros2 launch arm_control arm.launch.py robot_params_file:=/path/to/our_robot.yaml
+    ros2 launch arm_control arm.launch.py namespace:=arm1        # a second arm: arm2
     ros2 launch arm_control arm.launch.py robot_state_publisher:=true markers:=true   # RViz
 
 Arguments: ``params_file`` (default: the installed share/arm_control/config/arm.yaml);
-``viewer``, ``markers``, ``recorder``, ``robot_state_publisher`` (each false by default).
-robot_state_publisher gets the URDF of the arm that ``params_file`` describes (the same
-generator that wrote urdf/arm.urdf), so its links match the simulated ones.
+``robot_params_file`` (default none), an overlay given to every node after it, naming only
+what differs; ``namespace`` (default none) for all the arm's nodes; ``viewer``, ``markers``,
+``recorder``, ``robot_state_publisher`` (each false by default).
+
+The files are read and checked before anything starts: a missing or unreadable file, or a
+bad parameter, stops the launch with an error naming the file and the parameter (exit code
+1), and no node starts.
+robot_state_publisher gets the URDF of the arm the files describe (the same generator that
+wrote urdf/arm.urdf), so its links match the simulated ones.
 """
 
+import tempfile
+
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import DeclareLaunchArgument, GroupAction, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
-from launch_ros.actions import Node
+from launch_ros.actions import Node, PushRosNamespace
 from launch_ros.substitutions import FindPackageShare
 
 PACKAGE = 'arm_control'
+SYSTEM_NODES = ('sim', 'controller', 'planner')
 OPTIONAL_NODES = ('viewer', 'markers', 'recorder')
 
 
-def _arm_node(executable, condition=None):
-    return Node(package=PACKAGE, executable=executable, name=executable,
-                parameters=[LaunchConfiguration('params_file')], output='screen',
-                emulate_tty=True, condition=condition)
-
-
-def _robot_state_publisher(context):
-    """robot_state_publisher with the URDF generated from ``params_file``."""
-    from arm_control.config import ArmConfig
-    from arm_control.parameters import read_parameter_files
+def _bring_up(context):
+    """Check the parameter files, then the nodes; or a logged reason and no node at all."""
+    from arm_control.bringup import check_parameter_files, namespaced_parameter_files
+    from arm_control.parameters import ParameterError
     from arm_control.visual.urdf import arm_urdf
-    params_file = LaunchConfiguration('params_file').perform(context)
-    arm = ArmConfig.from_parameters(read_parameter_files([params_file], 'robot_state_publisher'))
-    return [Node(package='robot_state_publisher', executable='robot_state_publisher',
-                 name='robot_state_publisher', output='screen',
-                 parameters=[{'robot_description': arm_urdf(arm)}],
-                 condition=IfCondition(LaunchConfiguration('robot_state_publisher')))]
+
+    files = [LaunchConfiguration('params_file').perform(context)]
+    overlay = LaunchConfiguration('robot_params_file').perform(context)
+    if overlay:
+        files.append(overlay)
+    namespace = LaunchConfiguration('namespace').perform(context).strip('/')
+    try:
+        arm = check_parameter_files(files)
+        if namespace:
+            files = namespaced_parameter_files(files, namespace,
+                                               tempfile.mkdtemp(prefix='arm_control_'))
+    except (ParameterError, OSError) as error:
+        # ros2 launch logs it as an error and exits with 1, before any node has started.
+        raise ParameterError(f'arm_control: no node started: {error}') from error
+
+    def arm_node(executable, condition=None):
+        return Node(package=PACKAGE, executable=executable, name=executable,
+                    parameters=[str(path) for path in files], output='screen',
+                    emulate_tty=True, condition=condition)
+
+    nodes = [arm_node(executable) for executable in SYSTEM_NODES]
+    nodes += [arm_node(executable, IfCondition(LaunchConfiguration(executable)))
+              for executable in OPTIONAL_NODES]
+    nodes.append(Node(package='robot_state_publisher', executable='robot_state_publisher',
+                      name='robot_state_publisher', output='screen',
+                      parameters=[{'robot_description': arm_urdf(arm)}],
+                      condition=IfCondition(LaunchConfiguration('robot_state_publisher'))))
+    if namespace:
+        return [GroupAction([PushRosNamespace(namespace)] + nodes)]
+    return nodes
 
 
 def generate_launch_description():
@@ -47,16 +76,19 @@ def generate_launch_description():
             default_value=PathJoinSubstitution([FindPackageShare(PACKAGE), 'config',
                                                 'arm.yaml']),
             description='ROS parameter file describing the arm, its world and every node'),
+        DeclareLaunchArgument(
+            'robot_params_file', default_value='',
+            description='a second parameter file, applied after params_file to every node: '
+                        'only what this robot changes'),
+        DeclareLaunchArgument('namespace', default_value='',
+                              description="namespace of all the arm's nodes and topics"),
         DeclareLaunchArgument('viewer', default_value='false',
                               description='start the viewer (a window, or PNG when headless)'),
         DeclareLaunchArgument('markers', default_value='false',
                               description='publish arm_markers (MarkerArray) for RViz'),
         DeclareLaunchArgument('recorder', default_value='false',
-                              description='record the run for plot_run'),
+                              description='record the run as a rosbag2 bag (MCAP)'),
         DeclareLaunchArgument('robot_state_publisher', default_value='false',
                               description='publish TF of the arm from joint_states and the URDF'),
     ]
-    nodes = [_arm_node(executable) for executable in ('sim', 'controller', 'planner')]
-    nodes += [_arm_node(executable, IfCondition(LaunchConfiguration(executable)))
-              for executable in OPTIONAL_NODES]
-    return LaunchDescription(arguments + nodes + [OpaqueFunction(function=_robot_state_publisher)])
+    return LaunchDescription(arguments + [OpaqueFunction(function=_bring_up)])

@@ -8,8 +8,8 @@ kept as a ``Sample`` (for ``plots.plot_run``) and as a ``Scene`` (for the viewer
     python scripts/readme_pictures.py docs/ --params config/frc_robot.yaml --name frc_robot
 
 writes ``<name>_viewer.png`` (the viewer mid-way through the longest move, path and goals
-shown) and ``<name>_run.png`` (angles and setpoints, tracking error, voltage, states) --
-with ``--recording`` also ``<name>_run.npz`` for ``plot_run`` -- and prints the goals.
+shown) and ``<name>_run.png`` (angles and setpoints, tracking error, voltage, states), and
+prints the goals.
 """
 
 import argparse
@@ -122,17 +122,12 @@ def main(argv=None) -> int:
     parser.add_argument('--name', default='default', help='prefix of the files written')
     parser.add_argument('--goals', nargs='*', default=None, help='presets, in order')
     parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--recording', action='store_true',
-                        help='also write <name>_run.npz, for plot_run')
     args = parser.parse_args(argv)
     run = closed_loop_run(args.params, args.goals, seed=args.seed)
     args.output.mkdir(parents=True, exist_ok=True)
     arm = config.load('sim', *args.params)[0]
     SceneView(arm).render_png(telling_frame(run), args.output / f'{args.name}_viewer.png')
-    recording = Recording.from_samples(run.samples)
-    if args.recording:
-        recording.save(args.output / f'{args.name}_run.npz')
-    plot_run(recording, args.output / f'{args.name}_run.png',
+    plot_run(Recording.from_samples(run.samples), args.output / f'{args.name}_run.png',
              title=f'{Path((args.params or ["arm.yaml"])[-1]).name}: '
                    f'{" → ".join(g[0] for g in run.goals)}',
              max_voltage=arm.battery.nominal_voltage)
@@ -142,8 +137,7 @@ def main(argv=None) -> int:
     for event in run.events:
         if event.level != 'info':
             print(f'{event.time_s:7.2f} s {event.level}: {event}')
-    print(f'wrote {args.name}_viewer.png, {args.name}_run.png'
-          f'{f", {args.name}_run.npz" if args.recording else ""} in {args.output}')
+    print(f'wrote {args.name}_viewer.png, {args.name}_run.png in {args.output}')
     return 0
 
 

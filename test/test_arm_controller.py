@@ -774,5 +774,5 @@ def test_new_gains_act_from_the_next_period(arm, controller_config):
         core.step(0.04, readings[2])
     error = cores[0].tracking_error_rad[0]
     assert abs(error) > 0.003
-    assert cores[1].feedback_v[0] - cores[0].feedback_v[0] == pytest.approx(kp * error,
-                                                                           rel=1e-6)
+    difference = cores[1].feedback_v[0] - cores[0].feedback_v[0]
+    assert difference == pytest.approx(kp * error, rel=1e-6)

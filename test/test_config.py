@@ -111,3 +111,12 @@ def test_every_parameter_has_a_description():
     for node in ('sim', 'controller', 'planner'):
         for name in read_parameter_file(path, node):
             assert descriptions.get(name), f'{name} has no comment in {path.name}'
+
+
+def test_recorder_settings_are_checked_naming_the_parameter():
+    params = read_parameter_file(config.default_parameter_file(), 'recorder')
+    assert config.RecorderConfig.from_parameters(params).output_dir == ''
+    with pytest.raises(ParameterError, match="'flush_period_s' = 0"):
+        config.RecorderConfig.from_parameters(dict(params, flush_period_s=0))
+    with pytest.raises(ParameterError, match="'output_dir' = 7"):
+        config.RecorderConfig.from_parameters(dict(params, output_dir=7))

@@ -1,4 +1,4 @@
-"""Recordings round-trip through their files; the run plot shows what was recorded."""
+"""The run plot shows what was recorded (bags and plot_run: test_bag.py)."""
 
 import math
 from pathlib import Path
@@ -8,7 +8,7 @@ from matplotlib import image
 import numpy as np
 import pytest
 
-from arm_control.visual.plots import main, plot_run, state_spans, tracking_error
+from arm_control.visual.plots import plot_run, state_spans, tracking_error
 from arm_control.visual.recording import Recording, Sample
 from arm_control.visual.scene import state_colour
 
@@ -35,24 +35,6 @@ def test_states_are_kept_at_each_change_only():
     states = recording.arrays('state')
     assert list(states['name']) == [name for _, name in STATES]
     assert states['time_s'] - 100.0 == pytest.approx([start for start, _ in STATES], abs=0.011)
-
-
-@pytest.mark.parametrize('suffix', ['.npz', '.csv'])
-def test_recording_round_trips_through_its_file(tmp_path, suffix):
-    recording = Recording.from_samples(synthetic_run())
-    recording.add_joints('measured', 104.0, (0.1, 0.2))              # no velocity: NaN
-    path = tmp_path / f'run{suffix}'
-    recording.save(path)
-    loaded = Recording.load(path)
-    assert len(loaded) == len(recording)
-    for stream in ('measured', 'truth', 'setpoint', 'voltage', 'state'):
-        for field, values in recording.arrays(stream).items():
-            if values.dtype.kind == 'f':
-                assert np.allclose(loaded.arrays(stream)[field], values, equal_nan=True), \
-                    (stream, field)
-            else:
-                assert list(loaded.arrays(stream)[field]) == list(values)
-    assert not list(tmp_path.glob('*.part'))
 
 
 def test_tracking_error_is_the_lag_between_setpoint_and_arm():
@@ -106,13 +88,6 @@ def test_plot_without_a_setpoint_says_so(tmp_path):
                for k in range(50)]
     figure = plot_run(Recording.from_samples(samples), tmp_path / 'run.png')
     assert 'no setpoint recorded' in [t.get_text() for t in figure.axes[1].texts]
-
-
-def test_command_line_plots_a_recorded_file(tmp_path, capsys):
-    Recording.from_samples(synthetic_run()).save(tmp_path / 'run.npz')
-    assert main([str(tmp_path / 'run.npz')]) == 0
-    assert (tmp_path / 'run.png').is_file()
-    assert '3.0 s' in capsys.readouterr().out
 
 
 def test_a_closed_loop_run_in_process_is_recorded_and_plotted(tmp_path):

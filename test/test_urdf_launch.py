@@ -10,13 +10,16 @@ import importlib.util
 import math
 from pathlib import Path
 import sys
+import tempfile
 import types
 from xml.etree import ElementTree
 
+from conftest import with_joint
 import numpy as np
 import pytest
 
 from arm_control import config
+from arm_control.bringup import node_parameters
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.visual.urdf import arm_urdf, joint_limits
 
@@ -139,8 +142,11 @@ def data_file_globs() -> dict[str, str]:
 class Recorded:
     """A stand-in for a launch class: keeps what it was built with."""
 
+    built: list = []            # every stand-in made since the fixture started
+
     def __init__(self, *args, **kwargs):
         self.args, self.kwargs = args, kwargs
+        Recorded.built.append(self)
 
 
 class LaunchConfiguration(Recorded):
@@ -151,13 +157,14 @@ class LaunchConfiguration(Recorded):
 LAUNCH_API = {
     'launch': ['LaunchDescription'],
     'launch.actions': ['DeclareLaunchArgument', 'OpaqueFunction', 'IncludeLaunchDescription',
-                       'GroupAction', 'SetEnvironmentVariable', 'LogInfo'],
+                       'GroupAction', 'SetEnvironmentVariable', 'LogInfo', 'Shutdown'],
     'launch.conditions': ['IfCondition', 'UnlessCondition'],
     'launch.substitutions': ['LaunchConfiguration', 'PathJoinSubstitution', 'TextSubstitution',
                              'PythonExpression', 'EnvironmentVariable'],
     'launch_ros.actions': ['Node', 'PushRosNamespace'],
     'launch_ros.substitutions': ['FindPackageShare'],
 }
+ARM_YAML = str(ROOT / 'config' / 'arm.yaml')
 
 
 @pytest.fixture
@@ -175,6 +182,19 @@ def launch_description(monkeypatch):
     return module.generate_launch_description()
 
 
+def bring_up(launch_description, **arguments):
+    """What the launch starts for these arguments (the rest at their defaults)."""
+    (opaque,) = [e for e in launch_description.args[0]
+                 if type(e).__name__ == 'OpaqueFunction']
+    context = {'params_file': ARM_YAML, 'robot_params_file': '', 'namespace': '', **arguments}
+    Recorded.built.clear()
+    return opaque.kwargs['function'](context)
+
+
+def nodes_of(actions):
+    return [a for a in actions if type(a).__name__ == 'Node']
+
+
 def test_launch_file_imports_only_the_real_launch_api():
     tree = ast.parse(LAUNCH.read_text())
     for node in ast.walk(tree):
@@ -185,18 +205,18 @@ def test_launch_file_imports_only_the_real_launch_api():
                 assert alias.name in LAUNCH_API[node.module], (node.module, alias.name)
 
 
-def test_launch_starts_sim_controller_planner_from_one_parameter_file(launch_description):
+def test_launch_starts_sim_controller_planner_from_the_parameter_files(launch_description):
     entities = launch_description.args[0]
-    nodes = [e for e in entities if type(e).__name__ == 'Node']
     declared = {e.args[0]: e.kwargs for e in entities
                 if type(e).__name__ == 'DeclareLaunchArgument'}
+    assert declared['robot_params_file']['default_value'] == ''
+    assert declared['namespace']['default_value'] == ''
     scripts = console_scripts()
+    nodes = [n for n in nodes_of(bring_up(launch_description))
+             if n.kwargs['package'] == 'arm_control']
     for node in nodes:
-        assert node.kwargs['package'] == 'arm_control'
         assert node.kwargs['executable'] in scripts, node.kwargs['executable']
-        (params_file,) = node.kwargs['parameters']
-        assert isinstance(params_file, LaunchConfiguration)
-        assert params_file.args == ('params_file',)
+        assert node.kwargs['parameters'] == [ARM_YAML]
     always = {n.kwargs['executable'] for n in nodes if n.kwargs.get('condition') is None}
     assert always == {'sim', 'controller', 'planner'}
     for node in nodes:
@@ -211,18 +231,78 @@ def test_launch_starts_sim_controller_planner_from_one_parameter_file(launch_des
     assert data_file_globs()['share/arm_control/config'] == 'config/*.yaml'
 
 
-def test_launch_gives_robot_state_publisher_the_urdf_of_the_params_file(launch_description,
-                                                                        arm):
-    entities = launch_description.args[0]
-    (opaque,) = [e for e in entities if type(e).__name__ == 'OpaqueFunction']
-    context = {'params_file': str(ROOT / 'config' / 'arm.yaml')}
-    (publisher,) = opaque.kwargs['function'](context)
-    assert publisher.kwargs['package'] == 'robot_state_publisher'
+def test_the_robot_file_comes_after_the_arm_file_for_every_node(launch_description, tmp_path):
+    robot = tmp_path / 'robot.yaml'
+    robot.write_text('/controller:\n  ros__parameters:\n    shoulder_pid: [60.0, 10.0, 4.0]\n')
+    nodes = [n for n in nodes_of(bring_up(launch_description, robot_params_file=str(robot)))
+             if n.kwargs['package'] == 'arm_control']
+    assert len(nodes) == 6
+    assert all(n.kwargs['parameters'] == [ARM_YAML, str(robot)] for n in nodes)
+
+
+def test_robot_state_publisher_gets_the_urdf_of_the_files(launch_description, arm, tmp_path):
+    (publisher,) = [n for n in nodes_of(bring_up(launch_description))
+                    if n.kwargs['package'] == 'robot_state_publisher']
     assert publisher.kwargs['executable'] == 'robot_state_publisher'
     (parameters,) = publisher.kwargs['parameters']
     assert parameters['robot_description'] == arm_urdf(arm)
     (flag,) = publisher.kwargs['condition'].args
     assert flag.args == ('robot_state_publisher',)
+    # a robot file that lengthens the forearm lengthens the URDF's
+    robot = tmp_path / 'robot.yaml'
+    robot.write_text('/**:\n  ros__parameters:\n    elbow:\n      length_m: 0.9\n')
+    (publisher,) = [n for n in nodes_of(bring_up(launch_description,
+                                                 robot_params_file=str(robot)))
+                    if n.kwargs['package'] == 'robot_state_publisher']
+    assert publisher.kwargs['parameters'][0]['robot_description'] == arm_urdf(
+        with_joint(arm, 'elbow', length_m=0.9))
+
+
+@pytest.mark.parametrize('robot_file, words', [
+    ('/**:\n  ros__parameters:\n    shoulder:\n      mass_kg: -30.0\n',
+     "parameter 'shoulder.mass_kg' = -30.0"),
+    ('/planner:\n  ros__parameters:\n    grid_resolution_rad: fine\n',
+     "parameter 'grid_resolution_rad' = 'fine'"),
+    ('/recorder:\n  ros__parameters:\n    flush_period_s: -1.0\n',
+     "parameter 'flush_period_s' = -1.0"),
+    ('/**:\n  ros__parameters: [unclosed\n', 'cannot read parameter file'),
+])
+def test_a_bad_parameter_file_starts_no_node(launch_description, tmp_path, robot_file, words):
+    robot = tmp_path / 'robot.yaml'
+    robot.write_text(robot_file)
+    with pytest.raises(config.ParameterError) as refused:
+        bring_up(launch_description, robot_params_file=str(robot))
+    assert words in str(refused.value) and str(robot) in str(refused.value)
+    assert 'no node started' in str(refused.value)
+    assert not [a for a in Recorded.built if type(a).__name__ == 'Node']
+
+
+def test_a_missing_parameter_file_starts_no_node(launch_description, tmp_path):
+    with pytest.raises(config.ParameterError, match='cannot read parameter file .*absent.yaml'):
+        bring_up(launch_description, params_file=str(tmp_path / 'absent.yaml'))
+    assert not [a for a in Recorded.built if type(a).__name__ == 'Node']
+
+
+def test_a_namespace_moves_every_node_and_its_parameter_sections(
+        launch_description, tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, 'tempdir', str(tmp_path))     # where the copies go
+    robot = tmp_path / 'robot.yaml'
+    robot.write_text('/controller:\n  ros__parameters:\n    shoulder_pid: [60.0, 10.0, 4.0]\n')
+    (group,) = bring_up(launch_description, namespace='arm1', robot_params_file=str(robot))
+    assert type(group).__name__ == 'GroupAction'
+    push, *nodes = group.args[0]
+    assert type(push).__name__ == 'PushRosNamespace' and push.args == ('arm1',)
+    arm_nodes = [n for n in nodes if n.kwargs['package'] == 'arm_control']
+    assert len(arm_nodes) == 6
+    files = arm_nodes[0].kwargs['parameters']
+    assert all(n.kwargs['parameters'] == files for n in arm_nodes) and len(files) == 2
+    assert all(Path(f).is_relative_to(tmp_path) for f in files)
+    # the node in /arm1 gets from the copies what /controller got from the originals
+    for node_name in ('controller', 'sim', 'planner'):
+        moved, _ = node_parameters(files, f'arm1/{node_name}')
+        original, _ = node_parameters([ARM_YAML, robot], node_name)
+        assert moved == original
+    assert node_parameters(files, 'arm1/controller')[0]['shoulder_pid'] == [60.0, 10.0, 4.0]
 
 
 def test_launch_and_urdf_files_are_installed_under_share(launch_description):

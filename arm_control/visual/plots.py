@@ -3,7 +3,7 @@ the state machine's states shaded behind. Matplotlib (Agg), no ROS.
 
     from arm_control.visual.plots import plot_run
     plot_run(Recording.from_samples(samples), 'run.png')     # an in-process run
-    python -m arm_control.visual.plots /tmp/arm_run.npz -o run.png   # a recorded one
+    ros2 run arm_control plot_run arm_run -o run.png         # a bag the recorder wrote
 """
 
 import argparse
@@ -15,6 +15,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 import numpy as np
 
+from arm_control.visual.bag import BagError, load_run
 from arm_control.visual.recording import Recording
 from arm_control.visual.scene import state_colour
 
@@ -127,15 +128,27 @@ def plot_run(recording: Recording, path=None, *, title: str = '', max_voltage: f
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(
-        description='Plot a run recorded by the recorder node (.npz or .csv) to a PNG.')
-    parser.add_argument('recording', type=Path)
+        description='Plot a run the recorder node recorded (a rosbag2 bag) to a PNG.')
+    parser.add_argument('bag', type=Path, help='the bag directory, or its .mcap file')
     parser.add_argument('-o', '--output', type=Path, default=None,
-                        help='the PNG to write (default: the recording with .png)')
+                        help='the PNG to write (default: the bag with .png)')
+    parser.add_argument('--namespace', default=None,
+                        help="the arm's namespace, when the bag holds several (/arm1)")
     parser.add_argument('--title', default='')
     args = parser.parse_args(argv)
-    recording = Recording.load(args.recording)
-    output = args.output or args.recording.with_suffix('.png')
-    plot_run(recording, output, title=args.title or args.recording.name)
+    try:
+        recording, notes = load_run(args.bag, args.namespace)
+    except BagError as error:
+        print(f'plot_run: {error}', file=sys.stderr)
+        return 1
+    for note in notes:
+        print(f'plot_run: {note}', file=sys.stderr)
+    if not len(recording):
+        print(f'plot_run: {args.bag} holds no joint_states, setpoint, voltage_command or '
+              'arm_state of the arm', file=sys.stderr)
+        return 1
+    output = args.output or args.bag.with_suffix('.png')
+    plot_run(recording, output, title=args.title or args.bag.name)
     print(f'{output}: {len(recording)} samples over '
           f'{_duration(recording):.1f} s')
     return 0

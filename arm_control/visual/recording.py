@@ -1,4 +1,4 @@
-"""A run of the arm as time-stamped streams, saved as .npz or .csv: no ROS here.
+"""A run of the arm as time-stamped streams, for plotting: no ROS here.
 
 Streams (times in s; angles in rad, rates in rad/s, voltages in V):
 
@@ -8,20 +8,16 @@ Streams (times in s; angles in rad, rates in rad/s, voltages in V):
     voltage    the commanded motor voltages (``voltage_command``): value [shoulder_V, elbow_V]
     state      the state machine's state (``arm_state``): name, kept at each change
 
-The ``recorder`` node fills one from ROS messages; a benchmark fills one from an in-process
-run with ``Recording.from_samples``.
+``bag.load_run`` fills one from a bag the ``recorder`` node wrote; the demo fills one from an
+in-process run with ``Recording.from_samples``.
 """
 
-import csv
 from dataclasses import dataclass
 import math
-import os
-from pathlib import Path
 
 import numpy as np
 
 JOINT_STREAMS = ('measured', 'truth', 'setpoint')
-CSV_COLUMNS = ('time_s', 'stream', 'shoulder', 'elbow', 'shoulder_rate', 'elbow_rate', 'state')
 
 
 @dataclass(frozen=True)
@@ -113,66 +109,3 @@ class Recording:
         firsts = [times[0] for times, _, _ in self._joints.values() if times]
         firsts += [t[0] for t in (self._voltage[0], self._state[0]) if t]
         return min(firsts, default=0.0)
-
-    # -- files -----------------------------------------------------------------------
-
-    def save(self, path) -> None:
-        """Write .npz (arrays named ``stream.field``) or .csv (one row per sample);
-        written aside and renamed, so a reader never sees half a file."""
-        path = Path(path)
-        partial = path.with_name(path.name + '.part')
-        if path.suffix == '.csv':
-            with open(partial, 'w', newline='') as handle:
-                self._write_csv(handle)
-        else:
-            arrays = {f'{stream}.{field}': values
-                      for stream in JOINT_STREAMS + ('voltage', 'state')
-                      for field, values in self.arrays(stream).items()}
-            with open(partial, 'wb') as handle:
-                np.savez_compressed(handle, **arrays)
-        os.replace(partial, path)
-
-    def _write_csv(self, handle) -> None:
-        writer = csv.writer(handle)
-        writer.writerow(CSV_COLUMNS)
-        rows = []
-        for stream in JOINT_STREAMS:
-            data = self.arrays(stream)
-            rows += [(t, stream, *p, *v, '') for t, p, v in
-                     zip(data['time_s'], data['position'], data['velocity'])]
-        data = self.arrays('voltage')
-        rows += [(t, 'voltage', *v, '', '', '') for t, v in zip(data['time_s'], data['value'])]
-        data = self.arrays('state')
-        rows += [(t, 'state', '', '', '', '', n) for t, n in zip(data['time_s'], data['name'])]
-        rows.sort(key=lambda row: row[0])
-        writer.writerows([repr(float(v)) if isinstance(v, (float, np.floating)) else v
-                          for v in row] for row in rows)
-
-    @classmethod
-    def load(cls, path) -> 'Recording':
-        path = Path(path)
-        recording = cls()
-        if path.suffix == '.csv':
-            with open(path, newline='') as handle:
-                for row in csv.DictReader(handle):
-                    time_s, stream = float(row['time_s']), row['stream']
-                    if stream in JOINT_STREAMS:
-                        recording.add_joints(
-                            stream, time_s, (float(row['shoulder']), float(row['elbow'])),
-                            (float(row['shoulder_rate']), float(row['elbow_rate'])))
-                    elif stream == 'voltage':
-                        recording.add_voltage(time_s, (float(row['shoulder']),
-                                                       float(row['elbow'])))
-                    elif stream == 'state':
-                        recording.add_state(time_s, row['state'])
-            return recording
-        with np.load(path) as data:
-            for stream in JOINT_STREAMS:
-                for t, p, v in zip(data[f'{stream}.time_s'], data[f'{stream}.position'],
-                                   data[f'{stream}.velocity']):
-                    recording.add_joints(stream, t, p, v)
-            for t, v in zip(data['voltage.time_s'], data['voltage.value']):
-                recording.add_voltage(t, v)
-            for t, n in zip(data['state.time_s'], data['state.name']):
-                recording.add_state(t, n)
-        return recording
