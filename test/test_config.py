@@ -114,7 +114,7 @@ def test_every_parameter_has_a_description():
 
 
 def test_recorder_settings_are_checked_naming_the_parameter():
-    params = read_parameter_file(config.default_parameter_file(), 'recorder')
+    params = read_parameter_file(parameters.default_parameter_file(), 'recorder')
     assert config.RecorderConfig.from_parameters(params).output_dir == ''
     with pytest.raises(ParameterError, match="'flush_period_s' = 0"):
         config.RecorderConfig.from_parameters(dict(params, flush_period_s=0))
