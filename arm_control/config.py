@@ -218,6 +218,7 @@ class SimConfig:
     initial_position: tuple[float, float]
     rest_until_first_command: bool
     random_seed: int
+    sim_time_factor: float          # 0: the node's clock; else /clock at this × real time
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'SimConfig':
@@ -229,6 +230,7 @@ class SimConfig:
             initial_position=read.numbers('initial_position', 2),
             rest_until_first_command=read.boolean('rest_until_first_command'),
             random_seed=read.integer('random_seed', low=-1),
+            sim_time_factor=read.number('sim_time_factor', low=0.0, high=100.0),
         )
 
 

@@ -5,11 +5,14 @@
     ros2 launch arm_control arm.launch.py robot_params_file:=/path/to/our_robot.yaml
     ros2 launch arm_control arm.launch.py namespace:=arm1        # a second arm: arm2
     ros2 launch arm_control arm.launch.py robot_state_publisher:=true markers:=true   # RViz
+    ros2 launch arm_control arm.launch.py sim_speed:=5.0     # simulated time, 5x real time
 
 Arguments: ``params_file`` (default: the installed share/arm_control/config/arm.yaml);
 ``robot_params_file`` (default none), an overlay given to every node after it, naming only
-what differs; ``namespace`` (default none) for all the arm's nodes; ``viewer``, ``markers``,
-``recorder``, ``robot_state_publisher`` (each false by default).
+what differs; ``namespace`` (default none) for all the arm's nodes; ``sim_speed`` (default 0:
+real time) runs the sim on simulated time that many times faster, every node following its
+``/clock`` (``use_sim_time``); ``viewer``, ``markers``, ``recorder``,
+``robot_state_publisher`` (each false by default).
 
 The files are read and checked before anything starts: a missing or unreadable file, or a
 bad parameter, stops the launch with an error naming the file and the parameter (exit code
@@ -43,6 +46,15 @@ def _bring_up(context):
     if overlay:
         files.append(overlay)
     namespace = LaunchConfiguration('namespace').perform(context).strip('/')
+    speed = LaunchConfiguration('sim_speed').perform(context)
+    try:
+        speed = float(speed)
+        if not 0.0 <= speed <= 100.0:
+            raise ValueError('not in [0, 100]')
+    except ValueError as error:
+        raise ValueError(f'arm_control: no node started: sim_speed = {speed!r}: expected a '
+                         f'number from 0 (real time) to 100 ({error})') from error
+    clock = [{'use_sim_time': True}] if speed > 0.0 else []
     try:
         arm = check_parameter_files(files)
         if namespace:
@@ -53,8 +65,9 @@ def _bring_up(context):
         raise ParameterError(f'arm_control: no node started: {error}') from error
 
     def arm_node(executable, condition=None):
+        own = [{'sim_time_factor': speed}] if executable == 'sim' and speed > 0.0 else clock
         return Node(package=PACKAGE, executable=executable, name=executable,
-                    parameters=[str(path) for path in files], output='screen',
+                    parameters=[str(path) for path in files] + own, output='screen',
                     emulate_tty=True, condition=condition)
 
     nodes = [arm_node(executable) for executable in SYSTEM_NODES]
@@ -62,7 +75,7 @@ def _bring_up(context):
               for executable in OPTIONAL_NODES]
     nodes.append(Node(package='robot_state_publisher', executable='robot_state_publisher',
                       name='robot_state_publisher', output='screen',
-                      parameters=[{'robot_description': arm_urdf(arm)}],
+                      parameters=[{'robot_description': arm_urdf(arm)}] + clock,
                       condition=IfCondition(LaunchConfiguration('robot_state_publisher'))))
     if namespace:
         return [GroupAction([PushRosNamespace(namespace)] + nodes)]
@@ -82,6 +95,9 @@ def generate_launch_description():
                         'only what this robot changes'),
         DeclareLaunchArgument('namespace', default_value='',
                               description="namespace of all the arm's nodes and topics"),
+        DeclareLaunchArgument('sim_speed', default_value='0.0',
+                              description='0: real time; > 0: simulated time (/clock from the '
+                                          'sim), this many times faster, use_sim_time everywhere'),
         DeclareLaunchArgument('viewer', default_value='false',
                               description='start the viewer (a window, or PNG when headless)'),
         DeclareLaunchArgument('markers', default_value='false',

@@ -79,11 +79,15 @@ def declare_parameters(node, node_name: str, tunable=(), on_change=None) -> dict
     return {name: node.get_parameter(name).value for name in declared}
 
 
-def controller_sees_planner(message: DiagnosticArray) -> Optional[bool]:
+def controller_sees_planner(message: DiagnosticArray,
+                            controller: Optional[str] = None) -> Optional[bool]:
     """Whether the controller's own client reaches the planner, from its diagnostics (None
-    if the message is not the controller's). Another node's view is no substitute: it may
-    discover the planner before the controller does, and a goal sent then fails."""
+    if the message is not the controller's; ``controller``: its full name, when several
+    arms share /diagnostics). Another node's view is no substitute: it may discover the
+    planner before the controller does, and a goal sent then fails."""
     for status_ in message.status:
+        if controller is not None and status_.name != controller:
+            continue
         for value in status_.values:
             if value.key == PLANNER_AVAILABLE:
                 return value.value == 'True'

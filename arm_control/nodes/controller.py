@@ -284,9 +284,11 @@ class ControllerNode(Node):
             self.core.kinematics, poses, request.start_q, self.core.forbidden)))
 
     def watch_planner(self) -> None:
-        """Whether the client reaches the planner (said by the core when it changes), and
-        calls a restarted planner will never answer, forgotten after twice the timeout."""
-        ready, now = self.plan_client.service_is_ready(), self.now_s()
+        """Whether goals can be planned -- the client reaches the planner and the worker is
+        up (said by the core when it changes) -- and calls a restarted planner will never
+        answer, forgotten after twice the timeout."""
+        ready = self.plan_client.service_is_ready() and self.worker.ready.is_set()
+        now = self.now_s()
         for future, sent_s in list(self.plan_calls.items()):
             if now - sent_s > 2.0 * self.config.planner_timeout_s:
                 self.plan_client.remove_pending_request(future)

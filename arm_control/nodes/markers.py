@@ -9,7 +9,6 @@ reachable annulus. Subscribes the same topics as the ``viewer``; publishes on ea
 
 import math
 import sys
-import time
 
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path
@@ -48,12 +47,16 @@ class MarkersNode(Node):
         self.create_subscription(Path, 'planned_path', self.on_path, LATCHED)
         self.create_subscription(PointStamped, 'goal_point', self.on_goal, COMMANDS)
 
+    def now_s(self) -> float:
+        """The node's clock (simulated time with use_sim_time), in seconds."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
     def _refused(self, why) -> None:
         if why:
             self.get_logger().warning(why, throttle_duration_sec=2.0)
 
     def on_joint_states(self, msg: JointState) -> None:
-        now = time.monotonic()
+        now = self.now_s()
         why = self.model.on_joint_state((messages.joint_pair(msg) or []), now)
         self._refused(why)
         if why is None and now - self.last_publish_s >= self.min_period_s:

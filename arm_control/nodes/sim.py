@@ -11,13 +11,23 @@ A command acts from when it arrives: the physics is brought up to that instant w
 previous one first. No command for ``command_timeout_s`` -> 0 V, as a disabled robot. The
 sim's own stalls (a loaded machine) are not the robot's: the time they cover is simulated
 with the command the robot had, up to ``MAX_CATCH_UP_S``.
+
+With ``sim_time_factor`` > 0 the sim owns time: it publishes ``/clock`` and advances the
+physics one period per tick of a wall-clock timer ``sim_time_factor`` times faster than real
+time; every other node runs with ``use_sim_time`` and follows it. It moves in step with the
+controller: once commanded, a period begins only when the command for the last one has come
+(or ``LOCKSTEP_WAIT_S`` of real time has passed), so a slow or paused process slows time
+down instead of leaving the arm at 0 V.
 """
 
 import math
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.time import Time
+from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
@@ -30,6 +40,8 @@ from arm_control.nodes.common import (COMMANDS, declare_parameters, loop_statist
 
 # After a stall the physics catches up at most this far; beyond, the arm waits.
 MAX_CATCH_UP_S = 0.1
+# In simulated time, a period waits at most this long (real time) for the last one's command.
+LOCKSTEP_WAIT_S = 0.5
 
 
 class SimNode(Node):
@@ -44,6 +56,9 @@ class SimNode(Node):
                               self.config.physics_step_s, seed)
         if self.config.rest_until_first_command:
             self.plant.rest()
+        self.simulated_time = self.config.sim_time_factor > 0.0
+        self.wall_clock = Clock(clock_type=ClockType.STEADY_TIME)
+        self.epoch_s = self.get_clock().now().nanoseconds * 1e-9   # sim time at plant time 0
         self.clock_origin_s = self.now_s()        # plant time 0
         self.last_command_s = -math.inf
         self.timed_out = True
@@ -51,6 +66,8 @@ class SimNode(Node):
         self.brownouts_said = 0
         self.brownouts_last_second = []
         self.periods_s, self.last_step_s = [], self.now_s()
+        self.commanded_this_period = False
+        self.period_began_wall_s = self.wall_clock.now().nanoseconds * 1e-9
 
         self.joint_states_pub = self.create_publisher(JointState, 'joint_states', STATE_STREAM)
         self.encoders_pub = self.create_publisher(JointState, 'motor_encoders', STATE_STREAM)
@@ -64,17 +81,32 @@ class SimNode(Node):
         self.create_subscription(JointState, '~/set_state', self.on_set_state, COMMANDS)
         self.create_service(Trigger, '~/reset', self.on_reset)
         self.period_s = 1.0 / self.config.publish_rate_hz
-        self.create_timer(self.period_s, self.step)
-        self.create_timer(1.0, self.publish_diagnostics)
+        if self.simulated_time:
+            self.clock_pub = self.create_publisher(ClockMessage, '/clock', 10)
+            self.create_timer(self.period_s / self.config.sim_time_factor, self.step,
+                              clock=self.wall_clock)
+            self.create_timer(1.0 / self.config.sim_time_factor, self.publish_diagnostics,
+                              clock=self.wall_clock)
+        else:
+            self.create_timer(self.period_s, self.step)
+            self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
             f'simulating the arm at {self.config.publish_rate_hz:g} Hz from '
             f'[{self.config.initial_position[0]:.3f}, {self.config.initial_position[1]:.3f}] rad')
 
     def now_s(self) -> float:
+        if self.simulated_time:
+            return self.epoch_s + self.plant.time_s
         return self.get_clock().now().nanoseconds * 1e-9
+
+    def stamp(self):
+        return Time(nanoseconds=round(self.now_s() * 1e9)).to_msg() if self.simulated_time \
+            else self.get_clock().now().to_msg()
 
     def catch_up(self, now_s: float) -> None:
         """Bring the physics up to ``now_s`` with the command it has."""
+        if self.simulated_time:
+            return                                    # time is the physics' own
         behind_s = now_s - self.clock_origin_s - self.plant.time_s
         if behind_s > MAX_CATCH_UP_S:                 # a long stall: the arm waited
             self.clock_origin_s += behind_s - MAX_CATCH_UP_S
@@ -95,6 +127,7 @@ class SimNode(Node):
         self.catch_up(now)
         self.plant.set_voltage(voltage)
         self.last_command_s = now
+        self.commanded_this_period = True
         if self.plant.resting:
             self.plant.release()
             self.get_logger().info('first voltage command: the arm leaves its rest')
@@ -128,6 +161,14 @@ class SimNode(Node):
         return response
 
     def step(self) -> None:
+        if self.simulated_time:
+            wall_s = self.wall_clock.now().nanoseconds * 1e-9
+            waiting = self.last_command_s > -math.inf and not self.commanded_this_period
+            if waiting and wall_s - self.period_began_wall_s < LOCKSTEP_WAIT_S:
+                return                        # the controller has not answered this period
+            self.commanded_this_period, self.period_began_wall_s = False, wall_s
+            self.plant.advance(self.period_s)
+            self.clock_pub.publish(ClockMessage(clock=self.stamp()))
         now = self.now_s()
         stalled = now - self.last_step_s > 2.0 * self.period_s     # the sim's, not the robot's
         self.periods_s.append(now - self.last_step_s)
@@ -155,7 +196,7 @@ class SimNode(Node):
         self.brownouts_said = len(self.plant.brownouts)
 
     def publish(self, reading) -> None:
-        stamp = self.get_clock().now().to_msg()
+        stamp = self.stamp()
         self.joint_states_pub.publish(messages.joint_state(
             stamp, reading.potentiometer_rad, reading.velocity_rad_s, reading.effort_nm))
         self.encoders_pub.publish(messages.joint_state(stamp, reading.encoder_rad,
@@ -195,7 +236,7 @@ class SimNode(Node):
                 + ('; one going on' if self.plant.browned_out_since_s is not None else ''))
         power = self.plant.power
         diagnostic = DiagnosticArray()
-        diagnostic.header.stamp = self.get_clock().now().to_msg()
+        diagnostic.header.stamp = self.stamp()
         diagnostic.status = [status(self, level, message, {
             'mean period (s)': f'{stats["mean"]:.4f}', 'worst period (s)': f'{stats["worst"]:.4f}',
             'commands rejected': self.commands_rejected,

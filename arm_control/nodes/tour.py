@@ -11,7 +11,6 @@ installed, ``ros2 run arm_control tour`` does the same.
 
 import math
 import sys
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
@@ -56,8 +55,14 @@ class TourNode(Node):
         self.goal_pub = self.create_publisher(PointStamped, 'goal_point', COMMANDS)
         self.create_subscription(String, 'arm_state', self.on_state, LATCHED)
         self.create_subscription(JointState, 'sim/ground_truth', self.on_truth, STATE_STREAM)
+        # /diagnostics is shared by every arm: listen to this namespace's controller.
+        self.controller_name = f"{self.get_namespace().rstrip('/')}/controller"
         self.create_subscription(DiagnosticArray, '/diagnostics', self.on_diagnostics, 10)
         self.create_timer(0.05, self.tick)
+
+    def now_s(self) -> float:
+        """The node's clock (simulated time with use_sim_time), in seconds."""
+        return self.get_clock().now().nanoseconds * 1e-9
 
     def on_state(self, msg: String) -> None:
         if msg.data != self.state:
@@ -70,7 +75,7 @@ class TourNode(Node):
             self.true_q = tuple(msg.position)
 
     def on_diagnostics(self, msg: DiagnosticArray) -> None:
-        seen = controller_sees_planner(msg)
+        seen = controller_sees_planner(msg, self.controller_name)
         if seen is not None:
             self.planner_seen = seen
 
@@ -82,7 +87,7 @@ class TourNode(Node):
         if self.sent_at is None:
             self.send_next()
             return
-        elapsed = time.monotonic() - self.sent_at
+        elapsed = self.now_s() - self.sent_at
         name, goal = self.goals[self.index]
         if self.left_start_state and self.state == FINISHED:
             if self.arrived_after_s is None:
@@ -118,7 +123,7 @@ class TourNode(Node):
         msg.point.x, msg.point.y = float(x), float(y)
         self.left_start_state, self.arrived_after_s = False, None
         self.goal_pub.publish(msg)
-        self.sent_at = time.monotonic()
+        self.sent_at = self.now_s()
         self.get_logger().info(f'goal {name}: ({x:+.2f}, {y:+.2f}) m')
 
 

@@ -9,7 +9,6 @@ no display, it writes the picture to ``png_path`` ``png_rate_hz`` times a second
 
 import os
 import sys
-import time
 
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import OccupancyGrid, Path
@@ -73,6 +72,10 @@ class ViewerNode(Node):
             self.create_timer(1.0 / self.config.rate_hz, self.refresh_window)
             self.get_logger().info('viewer window open: click to send a goal_point')
 
+    def now_s(self) -> float:
+        """The node's clock (simulated time with use_sim_time), in seconds."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
     def _open_window(self):
         import matplotlib
         matplotlib.use('TkAgg')
@@ -92,7 +95,7 @@ class ViewerNode(Node):
 
     def on_joint_states(self, msg: JointState) -> None:
         self._refused(self.model.on_joint_state(messages.joint_pair(msg) or [],
-                                                time.monotonic()))
+                                                self.now_s()))
 
     def on_setpoint(self, msg: JointState) -> None:
         self._refused(self.model.on_setpoint((messages.joint_pair(msg) or [])))
@@ -146,14 +149,14 @@ class ViewerNode(Node):
             self.get_logger().info('window closed: stopping')
             self.context.try_shutdown()         # rclpy.spin returns; run() cleans up
             return
-        self.view.draw_live(self.model.scene(time.monotonic()))
+        self.view.draw_live(self.model.scene(self.now_s()))
         self.view.figure.canvas.flush_events()
 
     def write_png(self) -> None:
         path = self.config.png_path
         partial = f'{path}.part'
         try:
-            self.view.render_png(self.model.scene(time.monotonic()), partial)
+            self.view.render_png(self.model.scene(self.now_s()), partial)
             os.replace(partial, path)          # readers never see half a picture
         except OSError as error:
             self.get_logger().error(f'cannot write {path}: {error}', throttle_duration_sec=10.0)
