@@ -34,11 +34,10 @@ from arm_control.control.goal_runner import GoalRunner
 from arm_control.control.motions import Setpoints
 from arm_control.control.pid import ArmPid
 from arm_control.control.plans import PlanRequest, PlanTimer, TimedPlan
-from arm_control.control.safety import SafetyRules
+from arm_control.control.safety import SafetyRules, sure_limits
 from arm_control.control.sensing import Sensing
 from arm_control.control.state_machine import (ArmState as S, COMMANDING, StateMachine,
                                                STOPPED, Trigger as T)
-from arm_control.control.trajectory import sure_acceleration_rad_s2, TrajectoryLimits
 from arm_control.model.kinematics import TwoLinkKinematics
 
 
@@ -52,7 +51,8 @@ class ArmController:
         self.plan_timer = PlanTimer(arm, config)
         dynamics, self.forbidden = self.plan_timer.dynamics, self.plan_timer.forbidden
         self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
-        self.max_velocity, self.max_acceleration = self._sure_limits(dynamics)
+        self.max_velocity, self.max_acceleration = sure_limits(dynamics, self.forbidden, arm,
+                                                               config)
         self.sensing = Sensing(arm, config.process_noise_rad_s2)
         self.pid = ArmPid.from_config(config)
         self.feedforward = PeriodFeedforward(dynamics, self.period_s,
@@ -65,7 +65,6 @@ class ArmController:
             self.max_acceleration)
         self.machine, self.events = StateMachine(), EventLog()
         self.goals = GoalRunner(arm, config, self.machine, self.events, self.setpoints)
-        self.planner_available: Optional[bool] = None    # as the node's client sees it
         self.last_step_s: Optional[float] = None
         self.commanded_q: Optional[np.ndarray] = None    # the setpoint last commanded
         self.estop_holding = False                        # e-stopped, holding (not at 0 V)
@@ -75,16 +74,6 @@ class ArmController:
         self.tracking_error_rad = np.zeros(2)
         self.estop_error, self.estops = '', 0
 
-    def _sure_limits(self, dynamics):
-        """Braking, holds and driver mode count on what the motors surely give in any pose:
-        no more than the free speed, and the least favourable free pose's acceleration,
-        within the trajectory's volts (the battery less the reserves)."""
-        config = self.config
-        volts = min(TrajectoryLimits.from_config(self.arm, config).budget)
-        return (np.minimum(config.max_velocity_rad_s, dynamics.free_speed_rad_s(volts)),
-                np.minimum(config.max_acceleration_rad_s2,
-                           sure_acceleration_rad_s2(dynamics, self.forbidden, volts)))
-
     def retune(self, arm: ArmConfig, config: ControllerConfig) -> None:
         """Settings changed at run time, already validated: gains, reserves, tolerances,
         dwell, presets. They act from the next period; the arm's physics are unchanged."""
@@ -93,7 +82,7 @@ class ArmController:
         self.safety.config = config
         self.pid.retune(config)
         self.plan_timer = PlanTimer(arm, config)
-        limits = self._sure_limits(self.plan_timer.dynamics)
+        limits = sure_limits(self.plan_timer.dynamics, self.forbidden, arm, config)
         self.max_velocity[:], self.max_acceleration[:] = limits     # shared with the others
 
     @property
@@ -219,20 +208,12 @@ class ArmController:
         self.goals.on_timed_plan(now_s, timed, self._rest_q())
 
     def on_planner_available(self, now_s: float, available: bool) -> None:
-        """Say when the planner comes or goes: a goal sent while it is away fails at its
-        planner timeout, and the reason should already be on record."""
-        if available == self.planner_available:
-            return
-        if available:
-            self._say(now_s, Kind.PLANNER_AVAILABLE, 'info',
-                      'the planner (plan_path) is available')
-        elif self.planner_available is None:
-            self._say(now_s, Kind.PLANNER_WAITING, 'info',
-                      'waiting for the planner (plan_path) to appear')
-        else:
-            self._say(now_s, Kind.PLANNER_GONE, 'warning',
-                      'the planner (plan_path) is gone: goals fail until it is back')
-        self.planner_available = available
+        """Whether the node's client reaches the planner (``GoalRunner.planner_seen``)."""
+        self.goals.planner_seen(now_s, available)
+
+    @property
+    def planner_available(self) -> Optional[bool]:
+        return self.goals.planner_available
 
     # ------------------------------------------------------------------ the control period
 
@@ -299,7 +280,7 @@ class ArmController:
             self.machine.fire(T.DRIVER_IDLE)
             self.setpoints.brake(now_s)
             self._say(now_s, Kind.DRIVER_IDLE, 'info', 'driver commands stopped: holding')
-        self.goals.supervise(now_s, self.sensing.state, self.planner_available)
+        self.goals.supervise(now_s, self.sensing.state)
 
     def _control(self, now_s: float, dt_s: float) -> np.ndarray:
         """Feedforward at the setpoint plus PID on the estimate, clamped to the bus voltage."""
@@ -355,17 +336,3 @@ class ArmController:
     def pending_goals(self):
         """The current goal (first) and the queued ones, in the order they will be visited."""
         return self.goals.queue.pending()
-
-    def diagnostics(self, now_s: float) -> dict:
-        return {
-            'state': str(self.state),
-            'queued goals': len(self.goals.queue.waiting),
-            'current goal': self.goals.queue.current.label if self.goals.queue.current else '',
-            'joint states age (s)': f'{self.sensing.age_s(now_s):.3f}',
-            'bus voltage (V)': f'{self.sensing.bus_voltage:.2f}',
-            'last error': self.last_error,
-            'voltage (V)': [round(float(v), 3) for v in self.voltage],
-            'tracking error (deg)': [round(math.degrees(e), 3) for e in self.tracking_error_rad],
-            'e-stops': self.estops,
-            **{f'goals {k}': v for k, v in self.goals.counts.items()},
-        }

@@ -38,6 +38,7 @@ class GoalRunner:
         self.arrived_s = -math.inf
         self.last_error = ''
         self.counts = dict.fromkeys(('queued', 'started', 'rejected', 'reached', 'failed'), 0)
+        self.planner_available: Optional[bool] = None    # as the node's client sees it
 
     # ------------------------------------------------------------------ goals in
 
@@ -150,11 +151,27 @@ class GoalRunner:
         self.last_error = f'goal {goal.label if goal else ""} failed: {reason}'
         self.events.say(now_s, Kind.GOAL_FAILED, 'warning', self.last_error)
 
-    def supervise(self, now_s: float, estimate, planner_available) -> None:
+    def planner_seen(self, now_s: float, available: bool) -> None:
+        """Say when the planner comes or goes: a goal sent while it is away fails at its
+        planner timeout, and the reason should already be on record."""
+        if available == self.planner_available:
+            return
+        if available:
+            self.events.say(now_s, Kind.PLANNER_AVAILABLE, 'info',
+                            'the planner (plan_path) is available')
+        elif self.planner_available is None:
+            self.events.say(now_s, Kind.PLANNER_WAITING, 'info',
+                            'waiting for the planner (plan_path) to appear')
+        else:
+            self.events.say(now_s, Kind.PLANNER_GONE, 'warning',
+                            'the planner (plan_path) is gone: goals fail until it is back')
+        self.planner_available = available
+
+    def supervise(self, now_s: float, estimate) -> None:
         """The planner's deadline, arrival, and the next goal once the arm is idle."""
         if self.plans.overdue(now_s):
             note = ' (the plan_path service is not available)' \
-                if planner_available is False else ''
+                if self.planner_available is False else ''
             self.fail(now_s, f'the planner did not answer within '
                              f'{self.config.planner_timeout_s:g} s{note}')
         state = self.machine.state

@@ -18,6 +18,7 @@ import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.motions import HoldTrajectory, Motion, StraightMove
+from arm_control.control.trajectory import sure_acceleration_rad_s2, TrajectoryLimits
 from arm_control.model.world import ForbiddenSpace
 
 # A joint past its limit by more than this (or 6 potentiometer sigmas) e-stops the arm.
@@ -95,3 +96,14 @@ class SafetyRules:
 
     def _move(self, now_s, q0, q1) -> Motion:
         return StraightMove(q0, q1, now_s, self.max_acceleration, self.max_velocity)
+
+
+def sure_limits(dynamics, forbidden, arm: ArmConfig, config: ControllerConfig):
+    """(speed, acceleration) per joint that braking, holds and driver mode may count on:
+    what the motors surely give in any free pose within the trajectory's volts (the battery
+    less the reserves) -- no more than the free speed, and the least favourable pose's
+    acceleration -- within the configured caps."""
+    volts = min(TrajectoryLimits.from_config(arm, config).budget)
+    return (np.minimum(config.max_velocity_rad_s, dynamics.free_speed_rad_s(volts)),
+            np.minimum(config.max_acceleration_rad_s2,
+                       sure_acceleration_rad_s2(dynamics, forbidden, volts)))

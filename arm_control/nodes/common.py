@@ -105,10 +105,10 @@ def guarded(callback):
             self.bad_inputs += 1
             self.get_logger().error(f'{callback.__name__} failed on its input: {error!r}',
                                     throttle_duration_sec=1.0)
-            if len(args) == 2 and hasattr(args[1], 'success'):
-                args[1].success, args[1].message = False, f'failed: {error!r}'
-                return args[1]
-            return None
+            response = next((a for a in args if hasattr(a, 'success')), None)
+            if response is not None:               # a service's: answered, unsuccessfully
+                response.success, response.message = False, f'failed: {error!r}'
+            return response
     return wrapper
 
 

@@ -1,0 +1,76 @@
+"""The controller's way to a plan: the ``plan_path`` client and the worker that times.
+
+A request goes to the planner node as GetPlan (start = the tool pose to plan from, goal =
+the point); its answer, turned back into joint waypoints, goes to the worker process
+(``PlanWorker``) to be checked and timed; the TimedPlan comes back through ``on_timed``, in
+the worker's result thread. A broken or empty answer comes back at once, with the reason.
+"""
+
+from nav_msgs.srv import GetPlan
+
+from arm_control.control.plans import PathPlan, TimedPlan
+from arm_control.nodes import messages
+from arm_control.nodes.plan_worker import PlanWorker
+from arm_control.planning.planner import waypoints_from_poses
+
+
+class PlanLink:
+    """One node's planner client and timing worker."""
+
+    def __init__(self, node, arm, config, kinematics, forbidden, on_timed):
+        self.node, self.kinematics, self.forbidden = node, kinematics, forbidden
+        self.planner_timeout_s = config.planner_timeout_s
+        self.on_timed = on_timed
+        self.client = node.create_client(GetPlan, 'plan_path')
+        self.worker = PlanWorker(arm, config, on_timed)
+        self.calls = {}                      # unanswered calls -> when they were sent
+
+    def now_s(self) -> float:
+        return self.node.get_clock().now().nanoseconds * 1e-9
+
+    def ready(self) -> bool:
+        """Goals can be planned: the client reaches the planner and the worker is up. Calls
+        a restarted planner will never answer are forgotten after twice the timeout."""
+        now = self.now_s()
+        for future, sent_s in list(self.calls.items()):
+            if now - sent_s > 2.0 * self.planner_timeout_s:
+                self.client.remove_pending_request(future)
+                del self.calls[future]
+        return self.client.service_is_ready() and self.worker.ready.is_set()
+
+    def send(self, requests) -> None:
+        for request in requests:
+            header = messages.header(self.node.get_clock().now().to_msg())
+            message = GetPlan.Request()
+            message.start = messages.pose_stamped(*self.kinematics.tool_pose(request.start_q),
+                                                  header)
+            message.goal = messages.pose_stamped(*request.goal.xy, 0.0, header)
+            future = self.client.call_async(message)
+            self.calls[future] = self.now_s()
+            future.add_done_callback(lambda done, r=request: self._answered(r, done))
+
+    def _answered(self, request, future) -> None:
+        """The planner's path as joint waypoints, to the worker for timing."""
+        self.calls.pop(future, None)
+        try:
+            poses = messages.poses_of(future.result().plan)
+        except Exception as error:                  # a broken answer must not stop the node
+            return self.on_timed(TimedPlan(request, None, f'the planner call failed: '
+                                                          f'{error!r}'))
+        if not poses:
+            return self.on_timed(TimedPlan(request, None, f'no plan to {request.goal.label}: '
+                                                          'the planner found no path (its log '
+                                                          'says why)'))
+        try:
+            waypoints = waypoints_from_poses(self.kinematics, poses, request.start_q,
+                                             self.forbidden)
+        except Exception as error:
+            return self.on_timed(TimedPlan(request, None, f'the planner answered a path that '
+                                                          f'is not of this arm: {error!r}'))
+        self.worker.submit(request, PathPlan(waypoints))
+
+    def retune(self, arm, config) -> None:
+        self.worker.retune(arm, config)
+
+    def close(self) -> None:
+        self.worker.close()
