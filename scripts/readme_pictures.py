@@ -25,7 +25,8 @@ from arm_control.control.closed_loop import ClosedLoop
 from arm_control.planning.planner import Planner
 from arm_control.visual.plots import plot_run
 from arm_control.visual.recording import Recording, Sample
-from arm_control.visual.scene import Scene, SceneView
+from arm_control.visual.scene import Scene
+from arm_control.visual.scene_view import SceneView
 
 
 class PlannerTap:

@@ -11,7 +11,8 @@ from arm_control.model.world import ForbiddenSpace
 from arm_control.visual import scene as scene_module
 from arm_control.visual.scene import (cspace_image, densify, GOAL_COLOUR, PATH_COLOUR,
                                       path_configurations, REACH_COLOUR, reachable_free, Scene,
-                                      SceneView, state_colour, workspace_extent)
+                                      state_colour, workspace_extent)
+from arm_control.visual.scene_view import SceneView
 
 SIZE_PX = (800, 450)
 

@@ -17,7 +17,8 @@ from visualization_msgs.msg import MarkerArray
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.nodes.common import COMMANDS, LATCHED
 from arm_control.visual.plots import main as plot_run_main
-from arm_control.visual.scene import GOAL_COLOUR, SceneView, state_colour
+from arm_control.visual.scene import GOAL_COLOUR, state_colour
+from arm_control.visual.scene_view import SceneView
 
 
 def rgb(colour):

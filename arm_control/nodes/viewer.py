@@ -19,7 +19,8 @@ from std_msgs.msg import String
 from arm_control.config import ArmConfig, FRAME_ID
 from arm_control.nodes import messages
 from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, STATE_STREAM
-from arm_control.visual.scene import cspace_from_occupancy, SceneView, workspace_extent
+from arm_control.visual.scene import cspace_from_occupancy, workspace_extent
+from arm_control.visual.scene_view import SceneView
 from arm_control.visual.viewer_model import ViewerConfig, ViewerModel
 
 
