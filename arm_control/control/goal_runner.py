@@ -39,6 +39,7 @@ class GoalRunner:
         self.last_error = ''
         self.counts = dict.fromkeys(('queued', 'started', 'rejected', 'reached', 'failed'), 0)
         self.planner_available: Optional[bool] = None    # as the node's client sees it
+        self.latency_s: dict[str, float] = {}             # of the last goal taken: where ...
 
     # ------------------------------------------------------------------ goals in
 
@@ -140,6 +141,16 @@ class GoalRunner:
             self.setpoints.schedule(motion)
             self.goal_q = motion.final_q
             self.machine.fire(T.PLAN_READY)
+            self.latency_s = self._latency(now_s, timed, value)
+
+    def _latency(self, now_s: float, timed: TimedPlan, begin_s: float) -> dict[str, float]:
+        """Where the time went between asking for the plan and the motion's start."""
+        asked = timed.request.sent_time_s
+        answered = timed.answered_s if math.isfinite(timed.answered_s) else asked
+        received = timed.received_s if math.isfinite(timed.received_s) else now_s
+        return {'planner round trip': answered - asked, 'timing': timed.compute_s,
+                'hand-over': max(received - answered - timed.compute_s, 0.0),
+                'waiting to start': begin_s - received, 'trajectory': timed.trajectory.duration_s}
 
     def fail(self, now_s: float, reason: str) -> None:
         self.plans.drop()
@@ -195,9 +206,11 @@ class GoalRunner:
         self.arrived_s = now_s
         self.counts['reached'] += 1
         goal = self.queue.finish()
+        went = ', '.join(f'{name} {1000 * seconds:.1f} ms' for name, seconds in
+                         self.latency_s.items())
         self.events.say(now_s, Kind.GOAL_REACHED, 'info',
                         f'reached {goal.label} {now_s - self.plans.started_s:.2f} s after '
-                        f'starting it (error {error[0]:+.2f}, {error[1]:+.2f} deg)')
+                        f'starting it (error {error[0]:+.2f}, {error[1]:+.2f} deg; {went})')
 
     def interrupt(self) -> None:
         """The arm stopped under the goal (sensors lost, moved): it goes first again."""

@@ -65,12 +65,19 @@ class PathPlan:
 
 @dataclass(frozen=True)
 class TimedPlan:
-    """A request's answer: a checked, timed trajectory, or the reason there is none."""
+    """A request's answer: a checked, timed trajectory, or the reason there is none.
+
+    ``compute_s``: the CPU time of the timing; ``answered_s``: when the planner answered
+    (NaN: in-process, no round trip); ``received_s``: when the core got it (the node's
+    clock) -- where a goal's time goes, before the arm moves.
+    """
 
     request: PlanRequest
     trajectory: object = None
     reason: str = ''
     compute_s: float = 0.0
+    answered_s: float = math.nan
+    received_s: float = math.nan
 
     @property
     def ok(self) -> bool:

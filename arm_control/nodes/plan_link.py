@@ -6,6 +6,9 @@ the point); its answer, turned back into joint waypoints, goes to the worker pro
 the worker's result thread. A broken or empty answer comes back at once, with the reason.
 """
 
+from dataclasses import replace
+import math
+
 from nav_msgs.srv import GetPlan
 
 from arm_control.control.plans import PathPlan, TimedPlan
@@ -22,8 +25,9 @@ class PlanLink:
         self.planner_timeout_s = config.planner_timeout_s
         self.on_timed = on_timed
         self.client = node.create_client(GetPlan, 'plan_path')
-        self.worker = PlanWorker(arm, config, on_timed)
+        self.worker = PlanWorker(arm, config, self._timed)
         self.calls = {}                      # unanswered calls -> when they were sent
+        self.answered_s = {}                 # request id -> when the planner answered
 
     def now_s(self) -> float:
         return self.node.get_clock().now().nanoseconds * 1e-9
@@ -49,24 +53,30 @@ class PlanLink:
             self.calls[future] = self.now_s()
             future.add_done_callback(lambda done, r=request: self._answered(r, done))
 
+    def _timed(self, timed) -> None:
+        """From the worker: stamped with when the planner answered and when it came back."""
+        answered = self.answered_s.pop(timed.request.request_id, math.nan)
+        self.on_timed(replace(timed, answered_s=answered, received_s=self.now_s()))
+
     def _answered(self, request, future) -> None:
         """The planner's path as joint waypoints, to the worker for timing."""
         self.calls.pop(future, None)
+        self.answered_s[request.request_id] = self.now_s()
         try:
             poses = messages.poses_of(future.result().plan)
         except Exception as error:                  # a broken answer must not stop the node
-            return self.on_timed(TimedPlan(request, None, f'the planner call failed: '
-                                                          f'{error!r}'))
+            return self._timed(TimedPlan(request, None, f'the planner call failed: '
+                                                        f'{error!r}'))
         if not poses:
-            return self.on_timed(TimedPlan(request, None, f'no plan to {request.goal.label}: '
-                                                          'the planner found no path (its log '
-                                                          'says why)'))
+            return self._timed(TimedPlan(request, None, f'no plan to {request.goal.label}: '
+                                                        'the planner found no path (its log '
+                                                        'says why)'))
         try:
             waypoints = waypoints_from_poses(self.kinematics, poses, request.start_q,
                                              self.forbidden)
         except Exception as error:
-            return self.on_timed(TimedPlan(request, None, f'the planner answered a path that '
-                                                          f'is not of this arm: {error!r}'))
+            return self._timed(TimedPlan(request, None, f'the planner answered a path that '
+                                                        f'is not of this arm: {error!r}'))
         self.worker.submit(request, PathPlan(waypoints))
 
     def retune(self, arm, config) -> None:
