@@ -41,7 +41,6 @@ def robot():
     yield stand_in
     bridge.close()
     stand_in.close()
-    ntcore.NetworkTableInstance.destroy(client)
 
 
 def loops(stand_in, seconds, before_each=None):
@@ -168,12 +167,14 @@ def test_the_executable_serves_and_stops_on_ctrl_c():
             time.sleep(0.05)
         assert bridge.readings[nt.POSITION].get(), 'no readings from frc_robot_sim'
         bridge.close()
+        client = None
         busy = subprocess.run([str(executable), '--port', str(port)], capture_output=True,
                               text=True, timeout=20)
         assert busy.returncode == 2 and f'cannot serve NT4 on 127.0.0.1:{port}' in busy.stderr
     finally:
         process.send_signal(signal.SIGINT)
         output = process.communicate(timeout=10)[0]
-        ntcore.NetworkTableInstance.destroy(client)
+        if client is not None:
+            ntcore.NetworkTableInstance.destroy(client)
     assert process.returncode == 0, output
     assert f'serving NT4 on 127.0.0.1:{port}' in output

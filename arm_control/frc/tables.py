@@ -72,7 +72,9 @@ class BridgeTables:
         self.instance.flush()
 
     def close(self) -> None:
+        """Stop the client and ntcore's threads (their listeners with them)."""
         self.instance.stopClient()
+        ntcore.NetworkTableInstance.destroy(self.instance)
 
 
 class RobotTables:
@@ -96,7 +98,9 @@ class RobotTables:
         self.readings[topic].set(value, time_us)
 
     def close(self) -> None:
+        """Stop the server and ntcore's threads (their listeners with them)."""
         self.instance.stopServer()
+        ntcore.NetworkTableInstance.destroy(self.instance)
         self._persist_dir.cleanup()
 
 

@@ -190,7 +190,9 @@ class FrcBridgeNode(Node):
                 header=header(value), name=list(JOINT_NAMES), position=list(position),
                 velocity=list(self.velocity or ()), effort=self.effort))
             self.mechanism.show('arm', position)
-            self.on_link_event(self.link.on_reading(self.now_s(), readings[nt.ENABLED].get()))
+            enabled = readings[nt.ENABLED].getAtomic()
+            if enabled.time:                # a reading counts once the robot said its mode
+                self.on_link_event(self.link.on_reading(self.now_s(), enabled.value))
 
     def checked(self, convert, value, topic: nt.NtTopic):
         """``convert(value)``, logged; None (and a warning) if the robot sent nonsense."""
@@ -245,6 +247,7 @@ class FrcBridgeNode(Node):
     # ------------------------------------------------------------------ the link
 
     def check_link(self) -> None:
+        self.on_nt()            # what arrived while this process was busy is not lost time
         self.on_link_event(self.link.check(self.now_s(), self.tables.connected()))
         self.tell_controller()
 
@@ -331,7 +334,6 @@ class FrcBridgeNode(Node):
             for listener in self.listeners:
                 self.instance.removeListener(listener)
             self.tables.close()
-            ntcore.NetworkTableInstance.destroy(self.instance)
             if self.run_log is not None:
                 self.run_log.close()
 
