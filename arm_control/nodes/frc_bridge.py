@@ -99,12 +99,13 @@ class FrcBridgeNode(Node):
                                    self.config.server_address, self.config.nt_port)
         self.mechanism = Mechanism2dPublisher(self.instance, self.arm)
         # ntcore calls listeners on its own thread: they only wake the executor, which
-        # reads the values on this node's thread.
+        # reads the values on this node's thread. The robot sets the position last in each
+        # loop, so that one wakes it for all the loop's readings.
         self.nt_wake = self.create_guard_condition(self.on_nt)
-        self.listeners = [self.instance.addListener(subscriber, ntcore.EventFlags.kValueRemote,
-                                                    lambda _: self.wake())
-                          for subscriber in self.tables.readings.values()]
-        self.listeners.append(self.instance.addConnectionListener(False, self.on_connection))
+        self.listeners = [
+            self.instance.addListener(self.tables.readings[nt.POSITION],
+                                      ntcore.EventFlags.kValueRemote, lambda _: self.wake()),
+            self.instance.addConnectionListener(False, self.on_connection)]
 
         self.create_timer(nt.LOOP_PERIOD_S, self.check_link)
         self.create_timer(1.0, self.publish_diagnostics)
@@ -234,8 +235,9 @@ class FrcBridgeNode(Node):
         except ValueError as error:
             self.refuse(f'ignored {error}')
             return
-        feedforward_v = self.feedforward(stamp_s(msg.header), position, velocity)
-        self.setpoint = (position, velocity, feedforward_v, self.now_s())
+        if self.config.mode == 'setpoint':
+            feedforward_v = self.feedforward(stamp_s(msg.header), position, velocity)
+            self.setpoint = (position, velocity, feedforward_v, self.now_s())
         self.mechanism.show('setpoint', position)
         self.record(CONTROLLER_SETPOINT, position)
         self.record(CONTROLLER_SETPOINT_VELOCITY, velocity)
@@ -247,7 +249,8 @@ class FrcBridgeNode(Node):
     # ------------------------------------------------------------------ the link
 
     def check_link(self) -> None:
-        self.on_nt()            # what arrived while this process was busy is not lost time
+        if self.now_s() - self.link.last_reading_s > self.config.reading_timeout_s:
+            self.on_nt()        # what arrived while this process was busy is not lost time
         self.on_link_event(self.link.check(self.now_s(), self.tables.connected()))
         self.tell_controller()
 
