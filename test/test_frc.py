@@ -186,16 +186,21 @@ def test_the_link_goes_found_lost_back_with_one_event_each():
     assert link.outgoing((3.0, 4.0)) == rules.ZERO_V              # nothing heard yet
     event = link.on_reading(1.0, robot_enabled=True)
     assert event.state == rules.LinkState.ENABLED and 'robot found, enabled' in event.message
-    assert link.controller_enabled and link.outgoing((3.0, 4.0)) == (3.0, 4.0)
+    assert event.controller_enabled is True
+    assert link.may_command and link.outgoing((3.0, 4.0)) == (3.0, 4.0)
     assert link.on_reading(1.02, robot_enabled=True) is None
     assert link.check(1.11, nt_connected=True) is None            # 0.09 s: not yet
     lost = link.check(1.13, nt_connected=True)
     assert lost.level == 'error' and 'no readings for 0.11 s (NT still connected)' in \
-        lost.message
-    assert not link.controller_enabled and link.outgoing((3.0, 4.0)) == rules.ZERO_V
+        lost.message and '0 V' in lost.message
+    # Lost is not disabled: the controller stops as its joint states stop, and carries on
+    # with its goals when they return.
+    assert lost.controller_enabled is None
+    assert not link.may_command and link.outgoing((3.0, 4.0)) == rules.ZERO_V
     assert link.check(2.0, nt_connected=False) is None            # said once
     back = link.on_reading(2.5, robot_enabled=True)
     assert back.level == 'info' and back.message.startswith('robot back, enabled')
+    assert link.outgoing((3.0, 4.0)) == (3.0, 4.0)
 
 
 def test_a_disabled_robot_gets_0v_and_a_disabled_controller():
@@ -203,8 +208,10 @@ def test_a_disabled_robot_gets_0v_and_a_disabled_controller():
     link.on_reading(1.0, robot_enabled=True)
     event = link.on_reading(1.02, robot_enabled=False)
     assert event.level == 'warning' and 'disabled: 0 V' in event.message
-    assert not link.controller_enabled and link.outgoing((5.0, 5.0)) == rules.ZERO_V
-    assert link.on_reading(1.04, robot_enabled=True).state == rules.LinkState.ENABLED
+    assert event.controller_enabled is False
+    assert not link.may_command and link.outgoing((5.0, 5.0)) == rules.ZERO_V
+    enabled = link.on_reading(1.04, robot_enabled=True)
+    assert enabled.state == rules.LinkState.ENABLED and enabled.controller_enabled is True
 
 
 # ---------------------------------------------------------------------- settings

@@ -3,8 +3,8 @@
 The robot side (``CommandWatchdog``): a command drives the motors until ``timeout_s`` after
 it was sent, then 0 V, like a motor controller's own CAN timeout; a command already older
 than that when it arrives is refused, never applied late. The bridge side (``RobotLink``):
-the controller may command the robot only while the robot's readings are fresh and the
-robot is enabled; otherwise the bridge sends 0 V and disables the controller.
+the controller's voltages go to the robot only while its readings are fresh and it is
+enabled, else 0 V; the controller is disabled and enabled with the robot.
 """
 
 from dataclasses import dataclass
@@ -59,7 +59,7 @@ class CommandWatchdog:
 
 
 class LinkState(str, Enum):
-    CONNECTING = 'connecting'       # no reading from the robot yet
+    CONNECTING = 'connecting'       # no reading from the robot yet: 0 V
     ENABLED = 'enabled'             # fresh readings, robot enabled: the controller commands it
     DISABLED = 'disabled'           # fresh readings, robot disabled: 0 V
     LOST = 'lost'                   # no reading for reading_timeout_s: 0 V
@@ -70,15 +70,22 @@ class LinkState(str, Enum):
 
 @dataclass(frozen=True)
 class LinkEvent:
-    """A change of the link's state, with a level ('info', 'warning', 'error') and words."""
+    """A change of the link's state: its level ('info', 'warning', 'error'), its words, and
+    what the controller should be told (enabled True or False; None: nothing)."""
 
     state: LinkState
     level: str
     message: str
+    controller_enabled: bool | None
 
 
 class RobotLink:
-    """The bridge's view of the robot, on the bridge's clock (seconds)."""
+    """The bridge's view of the robot, on the bridge's clock (seconds).
+
+    The controller follows the robot's enable. A lost robot does not disable it: its joint
+    states stop, so it stops commanding on its own (after ``joint_state_timeout_s``) and
+    carries on with its goals when they return, as after any loss of its sensors.
+    """
 
     def __init__(self, reading_timeout_s: float):
         if not reading_timeout_s > 0.0:
@@ -86,34 +93,33 @@ class RobotLink:
         self.reading_timeout_s = reading_timeout_s
         self.state = LinkState.CONNECTING
         self.last_reading_s = -math.inf
-        self.robot_enabled = False
 
     @property
-    def controller_enabled(self) -> bool:
-        """Whether the controller should be enabled: only a fresh, enabled robot."""
+    def may_command(self) -> bool:
+        """Only a fresh, enabled robot is sent the controller's voltages."""
         return self.state == LinkState.ENABLED
 
     def outgoing(self, voltage) -> tuple[float, float]:
-        """The voltage to send: the controller's while the robot is enabled, else 0 V."""
-        return tuple(voltage) if self.controller_enabled else ZERO_V
+        """The voltage to send: the controller's while the robot may be commanded, else 0 V."""
+        return tuple(voltage) if self.may_command else ZERO_V
 
     def on_reading(self, now_s: float, robot_enabled: bool) -> LinkEvent | None:
-        """A reading arrived (with the robot's enabled flag)."""
+        """A reading arrived, with the robot's enabled flag."""
         self.last_reading_s = now_s
-        self.robot_enabled = bool(robot_enabled)
-        state = LinkState.ENABLED if self.robot_enabled else LinkState.DISABLED
+        state = LinkState.ENABLED if robot_enabled else LinkState.DISABLED
         if state == self.state:
             return None
         prefix = {LinkState.CONNECTING: 'robot found, ',
                   LinkState.LOST: 'robot back, '}.get(self.state, 'robot ')
         self.state = state
         if state == LinkState.ENABLED:
-            return LinkEvent(state, 'info', f'{prefix}enabled: the controller is enabled')
-        return LinkEvent(state, 'warning',
-                         f'{prefix}disabled: 0 V, the controller is disabled')
+            return LinkEvent(state, 'info', f'{prefix}enabled: the controller is enabled',
+                             True)
+        return LinkEvent(state, 'warning', f'{prefix}disabled: 0 V, the controller is disabled',
+                         False)
 
     def check(self, now_s: float, nt_connected: bool) -> LinkEvent | None:
-        """The readings stopped for longer than reading_timeout_s: the link is lost."""
+        """The readings stopped for longer than reading_timeout_s: the robot is lost."""
         age_s = now_s - self.last_reading_s
         if self.state in (LinkState.LOST, LinkState.CONNECTING) or \
                 age_s <= self.reading_timeout_s:
@@ -121,5 +127,5 @@ class RobotLink:
         self.state = LinkState.LOST
         how = 'NT still connected' if nt_connected else 'NT disconnected'
         return LinkEvent(LinkState.LOST, 'error',
-                         f'lost the robot: no readings for {age_s:.2f} s ({how}): 0 V, '
-                         'the controller is disabled')
+                         f'lost the robot: no readings for {age_s:.2f} s ({how}): 0 V until '
+                         'it is back; the controller stops as its joint states do', None)

@@ -6,8 +6,9 @@ readings become ``joint_states``, ``motor_encoders`` (JointState), ``battery_sta
 them. ``voltage_command`` goes to the robot with its NT timestamp (mode ``voltage``), or
 the controller's ``controller/setpoint`` with the model's feedforward (mode ``setpoint``),
 for a loop on the roboRIO. A disabled robot, or one whose readings stop for
-``reading_timeout_s``, gets 0 V, and the controller is disabled (``controller/enable``)
-until the robot is back and enabled. Publishes the arm as a Mechanism2d on NT,
+``reading_timeout_s`` (an error), gets 0 V. The controller is disabled and enabled with the
+robot (``controller/enable``); when the robot is lost, its joint states stop, and it stops
+commanding on its own. Publishes the arm as a Mechanism2d on NT,
 ``~/events`` (String) and ``/diagnostics``; logs the run as a .wpilog when ``wpilog_path``
 is set. The rules live in ``arm_control.frc``; this shell only wires ROS to them.
 """
@@ -215,17 +216,17 @@ class FrcBridgeNode(Node):
             self.refuse(f'ignored {error}; the robot stops on its own when commands stop')
             return
         self.record(CONTROLLER_VOLTAGE, voltage)
-        setpoint = self.setpoint
-        if self.config.mode == 'setpoint' and self.link.controller_enabled and \
-                commanding(voltage) and setpoint is not None and \
-                self.now_s() - setpoint[3] <= SETPOINT_MAX_AGE_S:
-            self.tables.send_setpoint(*setpoint[:3])
-            for topic, values in zip(nt.SETPOINT_COMMAND, setpoint[:3]):
-                self.record(topic, values)
-        else:
-            outgoing = self.link.outgoing(voltage)
+        outgoing = self.link.outgoing(voltage)
+        if self.config.mode == 'voltage' or not commanding(outgoing):
             self.tables.send_voltage(outgoing)
             self.record(nt.VOLTAGE_COMMAND, outgoing)
+        elif self.setpoint is not None and \
+                self.now_s() - self.setpoint[3] <= SETPOINT_MAX_AGE_S:
+            self.tables.send_setpoint(*self.setpoint[:3])
+            for topic, values in zip(nt.SETPOINT_COMMAND, self.setpoint[:3]):
+                self.record(topic, values)
+        else:
+            return      # no fresh setpoint: nothing, and the robot's own timeout stops it
         self.counts['commands sent'] += 1
 
     def on_setpoint(self, msg: JointState) -> None:
@@ -266,12 +267,13 @@ class FrcBridgeNode(Node):
             self.get_logger().info(event.message)
         self.events_pub.publish(String(data=event.message))
         self.record(BRIDGE_EVENTS, event.message)
-        if not self.link.controller_enabled:
+        if not self.link.may_command:
             self.tables.send_voltage(ZERO_V)
             self.record(nt.VOLTAGE_COMMAND, ZERO_V)
-        self.enable_wanted = self.link.controller_enabled
-        self.enable_asked_s = -math.inf
-        self.tell_controller()
+        if event.controller_enabled is not None:
+            self.enable_wanted = event.controller_enabled
+            self.enable_asked_s = -math.inf
+            self.tell_controller()
         self.publish_diagnostics(event)
 
     def tell_controller(self) -> None:
