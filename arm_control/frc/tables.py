@@ -1,7 +1,8 @@
 """The ntcore end of each side of the contract: the bridge's NT4 client, the robot's server.
 
-Both send every value the moment it is set (``flush``) and keep duplicates: a robot at rest
-publishes the same reading every loop, and each one says it is alive.
+Both send every value the moment it is set (``flush``), every one of them (``sendAll``: two
+set within one NT period are not merged into the newer), and keep duplicates: a robot at
+rest publishes the same reading every loop, and each one says it is alive.
 """
 
 import math
@@ -14,7 +15,7 @@ import ntcore
 from arm_control.frc import contract as nt
 
 LOOPBACK = '127.0.0.1'
-SEND = ntcore.PubSubOptions(periodic=0.005, keepDuplicates=True)
+SEND = ntcore.PubSubOptions(periodic=0.005, keepDuplicates=True, sendAll=True)
 RECEIVE = ntcore.PubSubOptions(periodic=0.005, keepDuplicates=True, sendAll=True, pollStorage=50)
 
 
