@@ -1,8 +1,10 @@
 """The FRC bridge's rules and conversions, without ROS: known answers and physical truths."""
 
+import ast
 import json
 import math
 from pathlib import Path
+import re
 import time
 
 from hypothesis import given, settings, strategies as st
@@ -27,6 +29,28 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_the_documented_contract_is_the_code_s():
     doc = (ROOT / 'docs' / 'frc_bridge.md').read_text()
     assert contract.markdown_table() in doc, 'docs/frc_bridge.md: paste contract.markdown_table()'
+
+
+def test_the_robot_side_example_parses_and_speaks_the_contract():
+    """docs/frc_bridge.md's robot.py: valid Python, and every NT topic it names is one of
+    the contract's, with the type the contract gives it."""
+    doc = (ROOT / 'docs' / 'frc_bridge.md').read_text()
+    example = doc.split('```python\n')[1].split('```')[0]
+    ast.parse(example)
+    contract_types = {t.name: t.type for t in contract.TOPICS}
+    named = re.findall(r"get(\w+?)Topic\(f?'(/arm/[\w/{}]+)'\)", example)
+    named += [('DoubleArray', f'/arm/robot/{n}') for n in
+              re.findall(r"pub_array\('(\w+)'\)", example)]
+    named += [('DoubleArray', f'/arm/command/{n}') for n in
+              re.findall(r"sub_array\('(\w+)'\)", example)]
+    kinds = {'Double': 'double', 'DoubleArray': 'double[]', 'Boolean': 'boolean'}
+    checked = 0
+    for kind, name in named:
+        if '{' in name:
+            continue
+        assert contract_types.get(name) == kinds[kind], name
+        checked += 1
+    assert checked >= 12
 
 
 def test_each_topic_once_and_each_side_in_its_own_table():

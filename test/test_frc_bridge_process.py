@@ -313,6 +313,40 @@ def test_the_bridge_says_it_lost_the_robot_and_the_controller_stops(rig):
     assert rig.spin_until(lambda: rig.state == 'waiting', 5.0)
 
 
+def test_bad_input_is_named_and_changes_nothing(rig):
+    """Malformed commands from ROS and malformed readings from the robot: each ignored with a
+    warning naming it; the bridge keeps bridging."""
+    node = rig.probe.node
+    voltage = node.create_publisher(Float64MultiArray, '/voltage_command', COMMANDS)
+    setpoint = node.create_publisher(JointState, '/controller/setpoint', 10)
+    position = rig.watch.instance.getDoubleArrayTopic(nt.POSITION.name).publish()
+    assert rig.spin_until(lambda: voltage.get_subscription_count() > 0 and
+                          setpoint.get_subscription_count() > 0, 5.0)
+    voltage.publish(Float64MultiArray(data=[1.0, 2.0, 3.0]))
+    voltage.publish(Float64MultiArray(data=[math.nan, 0.0]))
+    setpoint.publish(JointState(position=[0.5], velocity=[0.0, 0.0]))
+    position.set([math.inf, 0.0])
+    rig.watch.instance.flush()
+    since = time.monotonic()
+    assert rig.spin_until(lambda: len([1 for t, _ in rig.heard['joint_states']
+                                       if t > since]) > 10, 5.0)
+    said = rig.output('frc_bridge')
+    assert 'ignored voltage_command: expected [shoulder, elbow], two finite numbers, got ' \
+        '[1.0, 2.0, 3.0]' in said
+    assert 'ignored controller/setpoint position: expected [shoulder, elbow]' in said
+    assert 'ignored a reading: /arm/robot/position_rad: expected [shoulder, elbow], two ' \
+        'finite numbers, got [inf, 0.0]' in said
+    assert rig.nodes['frc_bridge'].alive()
+    assert all(math.isfinite(p) for t, m in rig.heard['joint_states'] if t > since
+               for p in m.position)
+
+
+def test_a_bad_parameter_stops_the_bridge_naming_it(launch):
+    bridge = launch('frc_bridge', '-p', 'mode:=torque')
+    assert bridge.process.wait(30) == 2
+    assert "'mode' = 'torque': expected one of ['voltage', 'setpoint']" in bridge.output()
+
+
 def test_the_run_is_a_wpilog_that_advantagescope_opens(rig):
     """Stopped, the bridge sends 0 V on its way out and closes the log."""
     from test_frc import read_wpilog

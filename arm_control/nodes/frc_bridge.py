@@ -45,6 +45,7 @@ IDENTITY = 'frc_bridge'             # how the robot's NT server sees this client
 SETPOINT_MAX_AGE_S = 0.1            # mode setpoint: an older setpoint is not sent
 ENABLE_RETRY_S = 0.5                # controller/enable not there: ask again this often
 SHUTDOWN_SEND_S = 0.05              # on exit, the last 0 V gets this long to leave
+REFUSAL_LOG_PERIOD_S = 1.0          # bad input from one source is said at most this often
 LEVELS = {'info': DiagnosticStatus.OK, 'warning': DiagnosticStatus.WARN,
           'error': DiagnosticStatus.ERROR}
 
@@ -77,6 +78,7 @@ class FrcBridgeNode(Node):
         self.supply_current_a = math.nan
         self.counts = {'readings': 0, 'commands sent': 0, 'inputs refused': 0}
         self.counts_said = dict(self.counts)
+        self.refused_said_s = {}        # when bad input from each source was last said
         self.enable_wanted = None       # what the controller should be told, until it answers
         self.enable_call = None
         self.enable_asked_s = -math.inf
@@ -117,9 +119,12 @@ class FrcBridgeNode(Node):
     def now_s(self) -> float:
         return time.monotonic() - self.started
 
-    def refuse(self, message: str) -> None:
+    def refuse(self, source: str, message: str) -> None:
+        """Warn about bad input from ``source``, at most once a second for each source."""
         self.counts['inputs refused'] += 1
-        self.get_logger().warning(message, throttle_duration_sec=1.0)
+        if self.now_s() - self.refused_said_s.get(source, -math.inf) >= REFUSAL_LOG_PERIOD_S:
+            self.refused_said_s[source] = self.now_s()
+            self.get_logger().warning(message)
 
     def record(self, topic: nt.NtTopic, value, time_us: int = 0) -> None:
         if self.run_log is not None:
@@ -201,7 +206,7 @@ class FrcBridgeNode(Node):
         try:
             converted = convert(value.value, topic.name)
         except ValueError as error:
-            self.refuse(f'ignored a reading: {error}')
+            self.refuse(topic.name, f'ignored a reading: {error}')
             return None
         self.record(topic, converted, value.time)
         return converted
@@ -213,7 +218,8 @@ class FrcBridgeNode(Node):
             voltage = clamp_voltage(joint_pair(msg.data, 'voltage_command'),
                                     self.arm.max_voltage)
         except ValueError as error:
-            self.refuse(f'ignored {error}; the robot stops on its own when commands stop')
+            self.refuse('voltage_command',
+                        f'ignored {error}; the robot stops on its own when commands stop')
             return
         self.record(CONTROLLER_VOLTAGE, voltage)
         outgoing = self.link.outgoing(voltage)
@@ -234,7 +240,7 @@ class FrcBridgeNode(Node):
             position = joint_pair(msg.position, 'controller/setpoint position')
             velocity = joint_pair(msg.velocity, 'controller/setpoint velocity')
         except ValueError as error:
-            self.refuse(f'ignored {error}')
+            self.refuse('controller/setpoint', f'ignored {error}')
             return
         if self.config.mode == 'setpoint':
             feedforward_v = self.feedforward(stamp_s(msg.header), position, velocity)
@@ -320,6 +326,7 @@ class FrcBridgeNode(Node):
                   for name in self.counts}
         if event is None:
             self.counts_said = dict(self.counts)
+        self.refused_said_s = {}        # when bad input from each source was last said
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()
         diagnostic.status = [status(self, level, message, {
