@@ -12,7 +12,6 @@ time, so a command held up on its way is refused, not applied late.
 
 from dataclasses import dataclass
 
-DEFAULT_NT_PORT = 5810          # NT4's port on a roboRIO
 LOOP_PERIOD_S = 0.02            # an FRC robot loop: readings and commands at 50 Hz
 
 

@@ -6,7 +6,9 @@ disable (``/arm/sim/enable``, as the Driver Station would). A command drives the
 only until ``command_timeout_s`` after it was sent, then 0 V, however late the loop runs
 (``CommandWatchdog``). Of the two kinds of command it applies the newest: voltages, or a
 setpoint with feedforward closed by a PD loop here, as robot code would
-(V = V_ff + kp·(θ_sp − θ) + kd·(θ̇_sp − θ̇), the controller's kp and kd).
+(V = V_ff + kp·(θ_sp − θ) + kd·(θ̇_sp − θ̇), the controller's kp and kd). As in ``sim``, the
+arm rests on its stow support until the first voltage that is not zero. The battery is
+ideal (the plant has no battery model): the bus is at ``max_voltage``.
 
     frc_robot_sim [--port PORT] [--params-file config/arm.yaml]
 """
@@ -53,7 +55,7 @@ class RobotStandIn:
     """The robot loop: commands in, the arm stepped, readings out (call ``tick`` at 50 Hz)."""
 
     def __init__(self, arm: config.ArmConfig, sim: config.SimConfig,
-                 robot: FrcRobotSimConfig, gains, port: int, instance=None):
+                 robot: FrcRobotSimConfig, gains, port: int):
         self.arm = arm
         seed = None if sim.random_seed < 0 else sim.random_seed
         self.plant = ArmPlant(arm, sim.initial_position, sim.physics_step_s, seed)
@@ -63,7 +65,7 @@ class RobotStandIn:
         self.gains = tuple((kp, kd) for kp, _, kd in gains)
         self.watchdog = CommandWatchdog(robot.command_timeout_s)
         self.enabled = robot.start_enabled
-        self.tables = RobotTables(instance or ntcore.NetworkTableInstance.create(), port)
+        self.tables = RobotTables(ntcore.NetworkTableInstance.create(), port)
         self.last_tick_s = None
         self.seen_us = {'voltage': 0, 'setpoint': 0, 'enable': 0}
         self.reading = self.plant.read()
@@ -141,7 +143,8 @@ class RobotStandIn:
         applied = []
         for from_s, to_s, command in self.watchdog.segments(start_s, now_s):
             if self.driving and command is None and self.enabled:
-                log.warning(f'no fresh command for {self.watchdog.timeout_s:g} s: 0 V')
+                self.complain('expired', now_s, f'no fresh command for '
+                              f'{self.watchdog.timeout_s:g} s: 0 V')
             self.driving = command is not None
             self.voltage = self.voltage_for(command)
             if self.plant.resting and any(v != 0.0 for v in self.voltage):

@@ -81,11 +81,6 @@ class FrcRobotSimConfig:
         )
 
 
-def load_bridge(path=None) -> FrcBridgeConfig:
-    return FrcBridgeConfig.from_parameters(
-        read_parameter_file(path or default_parameter_file(), 'frc_bridge'))
-
-
 def load_robot_sim(path=None) -> FrcRobotSimConfig:
     return FrcRobotSimConfig.from_parameters(
         read_parameter_file(path or default_parameter_file(), 'frc_robot_sim'))
