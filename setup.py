@@ -32,6 +32,8 @@ setup(
             'markers = arm_control.nodes.markers:main',
             'recorder = arm_control.nodes.recorder:main',
             'plot_run = arm_control.visual.plots:main',
+            'frc_bridge = arm_control.nodes.frc_bridge:main',
+            'frc_robot_sim = arm_control.frc.robot_sim:main',
         ],
     },
 )

@@ -1,0 +1,386 @@
+"""The FRC bridge's rules and conversions, without ROS: known answers and physical truths."""
+
+import ast
+import json
+import math
+from pathlib import Path
+import re
+import time
+
+from hypothesis import given, settings, strategies as st
+import ntcore
+import numpy as np
+import pytest
+
+from arm_control.frc import contract, conversions, mechanism, rules, settings as frc_settings
+from arm_control.frc.tables import free_port, LOOPBACK
+from arm_control.frc.wpilog import RunLog
+from arm_control.model.dynamics import ArmDynamics
+from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.model.plant import ArmPlant
+from arm_control.parameters import ParameterError, read_parameter_file
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+# ---------------------------------------------------------------------- the contract
+
+
+def test_the_documented_contract_is_the_code_s():
+    doc = (ROOT / 'docs' / 'frc_bridge.md').read_text()
+    assert contract.markdown_table() in doc, 'docs/frc_bridge.md: paste contract.markdown_table()'
+
+
+def test_the_robot_side_example_parses_and_speaks_the_contract():
+    """docs/frc_bridge.md's robot.py: valid Python, and every NT topic it names is one of
+    the contract's, with the type the contract gives it."""
+    doc = (ROOT / 'docs' / 'frc_bridge.md').read_text()
+    example = doc.split('```python\n')[1].split('```')[0]
+    ast.parse(example)
+    contract_types = {t.name: t.type for t in contract.TOPICS}
+    named = re.findall(r"get(\w+?)Topic\(f?'(/arm/[\w/{}]+)'\)", example)
+    named += [('DoubleArray', f'/arm/robot/{n}') for n in
+              re.findall(r"pub_array\('(\w+)'\)", example)]
+    named += [('DoubleArray', f'/arm/command/{n}') for n in
+              re.findall(r"sub_array\('(\w+)'\)", example)]
+    kinds = {'Double': 'double', 'DoubleArray': 'double[]', 'Boolean': 'boolean'}
+    checked = 0
+    for kind, name in named:
+        if '{' in name:
+            continue
+        assert contract_types.get(name) == kinds[kind], name
+        checked += 1
+    assert checked >= 12
+
+
+def test_each_topic_once_and_each_side_in_its_own_table():
+    names = [topic.name for topic in contract.TOPICS]
+    assert len(names) == len(set(names))
+    assert all(t.name.startswith('/arm/robot/') and t.publisher == 'robot'
+               for t in contract.ROBOT_READINGS)
+    assert all(t.publisher == 'bridge' for t in contract.COMMANDS)
+    assert all(t.name.startswith('/arm/command/') for t in contract.SETPOINT_COMMAND)
+
+
+# ---------------------------------------------------------------------- conversions
+
+
+@pytest.mark.parametrize('values', [[1.0], [1.0, 2.0, 3.0], [math.nan, 0.0], [0.0, math.inf],
+                                    ['a', 1.0], []])
+def test_a_malformed_pair_is_refused_naming_the_topic(values):
+    with pytest.raises(ValueError, match='/arm/robot/position_rad'):
+        conversions.joint_pair(values, '/arm/robot/position_rad')
+
+
+def test_stall_current_gives_stall_torque_through_the_gearbox(arm):
+    """τ = n·G·Kt·I: one CIM at its stall current makes its stall torque; the shoulder has
+    two of them behind 159.3:1."""
+    dynamics = ArmDynamics(arm)
+    stall_a = arm.shoulder.motor.stall_current_a
+    effort = conversions.joint_effort_nm((stall_a, -stall_a), dynamics)
+    assert effort[0] == pytest.approx(2 * 159.3 * arm.shoulder.motor.stall_torque_nm)
+    assert effort[1] == pytest.approx(-1 * 159.3 * arm.shoulder.motor.stall_torque_nm)
+
+
+def test_effort_from_current_is_the_torque_the_sim_reports(arm):
+    """The robot reports a motor's current; the bridge's effort must be the torque the sim
+    itself reports for the same voltage and speed."""
+    plant = ArmPlant(arm, (0.7, -0.4))
+    plant.reset((0.7, -0.4), (1.3, -2.1))
+    plant.set_voltage((7.5, -4.0))
+    plant.advance(0.001)
+    reading = plant.read()
+    motors = plant.dynamics.motors
+    one_motor_a = [m.current_a(v, w)
+                   for m, v, w in zip(motors, reading.voltage, reading.true_state[2:])]
+    assert conversions.joint_effort_nm(one_motor_a, plant.dynamics) == \
+        pytest.approx(tuple(reading.effort_nm))
+
+
+def test_battery_current_is_negative_while_discharging():
+    assert conversions.battery_state_current_a(42.0) == -42.0
+
+
+def test_an_nt_value_keeps_its_age_on_the_ros_clock():
+    """A value set 20 ms ago on NT's clock is stamped 20 ms before ROS's now."""
+    ros_now_ns = 1_700_000_000_123_456_789
+    stamp = conversions.ros_stamp_ns(value_time_us=5_000_000, nt_now_us=5_020_000,
+                                     ros_now_ns=ros_now_ns)
+    assert ros_now_ns - stamp == 20_000_000
+
+
+def test_only_exactly_zero_means_not_commanding():
+    assert not conversions.commanding((0.0, 0.0))
+    assert not conversions.commanding((0.0, -0.0))
+    assert conversions.commanding((0.0, 1e-9))
+
+
+@pytest.mark.parametrize('position', [(0.3, 0.5), (1.5708, -1.5708), (2.4, 1.1)])
+def test_feedforward_of_a_still_setpoint_holds_the_arm(arm, position):
+    """Held at a still setpoint, the model's voltage keeps the arm there: the sim, given it
+    open loop, drifts less than 0.5° in 2 s."""
+    feedforward = conversions.SetpointFeedforward(ArmDynamics(arm), arm.battery.nominal_voltage)
+    for k in range(3):
+        voltage = feedforward(0.02 * k, position, (0.0, 0.0))
+    plant = ArmPlant(arm, position)
+    plant.set_voltage(voltage)
+    plant.advance(2.0)
+    assert np.max(np.abs(np.array(plant.state[:2]) - position)) < math.radians(0.5)
+
+
+def test_feedforward_gives_the_setpoint_s_acceleration(arm):
+    """Setpoints of a motion at constant acceleration: the feedforward voltage, through the
+    forward dynamics, accelerates the arm as the setpoints do."""
+    dynamics = ArmDynamics(arm)
+    feedforward = conversions.SetpointFeedforward(dynamics, arm.battery.nominal_voltage)
+    acceleration = np.array([3.0, -5.0])
+    for k in range(5):
+        t = 0.02 * k
+        q = np.array([0.5, 0.8]) + 0.5 * acceleration * t ** 2
+        qd = acceleration * t
+        voltage = feedforward(t, q, qd)
+    state = [*q, *qd]
+    achieved = np.array(dynamics.derivative(state, voltage)[2:])
+    assert achieved == pytest.approx(acceleration, rel=1e-6)
+
+
+def test_feedforward_takes_no_acceleration_across_a_gap(arm):
+    dynamics = ArmDynamics(arm)
+    feedforward = conversions.SetpointFeedforward(dynamics, arm.battery.nominal_voltage)
+    feedforward(0.0, (0.5, 0.5), (0.0, 0.0))
+    after_gap = feedforward(1.0, (0.5, 0.5), (2.0, 0.0))       # 1 s later: not a 2 rad/s² jump
+    assert after_gap == pytest.approx(dynamics.voltage_for((0.5, 0.5), (2.0, 0.0), (0.0, 0.0)))
+
+
+# ---------------------------------------------------------------------- the robot's watchdog
+
+
+def test_a_command_drives_until_its_timeout_then_0v():
+    watchdog = rules.CommandWatchdog(0.1)
+    assert watchdog.offer('drive', sent_s=10.00, now_s=10.01) == ''
+    assert watchdog.segments(10.02, 10.04) == [(10.02, 10.04, 'drive')]
+    assert watchdog.segments(10.08, 10.14) == [(10.08, 10.1, 'drive'), (10.1, 10.14, None)]
+    assert watchdog.segments(10.14, 10.16) == [(10.14, 10.16, None)]
+
+
+def test_a_command_older_than_the_timeout_is_refused_not_applied_late():
+    watchdog = rules.CommandWatchdog(0.1)
+    assert 'stale: sent 0.500 s ago' in watchdog.offer('old', sent_s=9.5, now_s=10.0)
+    assert watchdog.segments(10.0, 10.02) == [(10.0, 10.02, None)]
+
+
+def test_a_command_older_than_the_one_held_is_refused():
+    watchdog = rules.CommandWatchdog(0.1)
+    watchdog.offer('new', sent_s=10.0, now_s=10.0)
+    assert 'not newer' in watchdog.offer('older', sent_s=9.99, now_s=10.0)
+    assert watchdog.command == 'new'
+
+
+def test_a_dropped_command_is_0v_at_once():
+    watchdog = rules.CommandWatchdog(0.1)
+    watchdog.offer('drive', sent_s=10.0, now_s=10.0)
+    watchdog.drop()
+    assert watchdog.segments(10.0, 10.02) == [(10.0, 10.02, None)]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.0, 0.2), st.floats(0.001, 0.3)), min_size=1,
+                max_size=30))
+def test_no_command_ever_drives_past_its_timeout(loops):
+    """Commands sent with random delays, loops run at random (late) times: every span a
+    command drives ends by its send time + timeout, and spans tile the time without gaps."""
+    timeout_s = 0.1
+    watchdog = rules.CommandWatchdog(timeout_s)
+    now_s = 0.0
+    for k, (delay_s, loop_s) in enumerate(loops):
+        start_s, now_s = now_s, now_s + loop_s
+        watchdog.offer(('command', k, now_s - delay_s), now_s - delay_s, now_s)
+        spans = watchdog.segments(start_s, now_s)
+        assert spans[0][0] == start_s and spans[-1][1] == now_s
+        assert all(a[1] == b[0] for a, b in zip(spans, spans[1:]))
+        for _, to_s, command in spans:
+            if command is not None:
+                assert to_s <= command[2] + timeout_s + 1e-12
+
+
+# ---------------------------------------------------------------------- the bridge's link
+
+
+def test_the_link_goes_found_lost_back_with_one_event_each():
+    link = rules.RobotLink(0.1)
+    assert link.outgoing((3.0, 4.0)) == rules.ZERO_V              # nothing heard yet
+    event = link.on_reading(1.0, robot_enabled=True)
+    assert event.state == rules.LinkState.ENABLED and 'robot found, enabled' in event.message
+    assert event.controller_enabled is True
+    assert link.may_command and link.outgoing((3.0, 4.0)) == (3.0, 4.0)
+    assert link.on_reading(1.02, robot_enabled=True) is None
+    assert link.check(1.11, nt_connected=True) is None            # 0.09 s: not yet
+    lost = link.check(1.13, nt_connected=True)
+    assert lost.level == 'error' and 'no readings for 0.11 s (NT still connected)' in \
+        lost.message and '0 V' in lost.message
+    # Lost is not disabled: the controller stops as its joint states stop, and carries on
+    # with its goals when they return.
+    assert lost.controller_enabled is None
+    assert not link.may_command and link.outgoing((3.0, 4.0)) == rules.ZERO_V
+    assert link.check(2.0, nt_connected=False) is None            # said once
+    back = link.on_reading(2.5, robot_enabled=True)
+    assert back.level == 'info' and back.message.startswith('robot back, enabled')
+    assert link.outgoing((3.0, 4.0)) == (3.0, 4.0)
+
+
+def test_a_disabled_robot_gets_0v_and_a_disabled_controller():
+    link = rules.RobotLink(0.1)
+    link.on_reading(1.0, robot_enabled=True)
+    event = link.on_reading(1.02, robot_enabled=False)
+    assert event.level == 'warning' and 'disabled: 0 V' in event.message
+    assert event.controller_enabled is False
+    assert not link.may_command and link.outgoing((5.0, 5.0)) == rules.ZERO_V
+    enabled = link.on_reading(1.04, robot_enabled=True)
+    assert enabled.state == rules.LinkState.ENABLED and enabled.controller_enabled is True
+
+
+# ---------------------------------------------------------------------- settings
+
+
+def bridge_parameters(**changes):
+    params = read_parameter_file(ROOT / 'config' / 'arm.yaml', 'frc_bridge')
+    params.update(changes)
+    return params
+
+
+@pytest.mark.parametrize('changes, words', [
+    (dict(mode='torque'), "'mode' = 'torque'"),
+    (dict(team_number=30000), "'team_number' = 30000"),
+    (dict(nt_port=0), "'nt_port' = 0"),
+    (dict(nt_port=70000), "'nt_port' = 70000"),
+    (dict(team_number=0, server_address=''), "'server_address' is empty"),
+    (dict(reading_timeout_s=0.0), "'reading_timeout_s' = 0.0"),
+])
+def test_bad_bridge_settings_are_named(changes, words):
+    with pytest.raises(ParameterError, match=words.replace('(', r'\(')):
+        frc_settings.FrcBridgeConfig.from_parameters(bridge_parameters(**changes))
+
+
+def test_a_team_number_is_the_server():
+    config = frc_settings.FrcBridgeConfig.from_parameters(bridge_parameters(team_number=6328))
+    assert config.server == 'team 6328 (port 5810)'
+
+
+# ---------------------------------------------------------------------- Mechanism2d
+
+
+@pytest.fixture
+def nt_pair():
+    """An NT4 server and a client connected to it, on a free loopback port."""
+    server, client = ntcore.NetworkTableInstance.create(), ntcore.NetworkTableInstance.create()
+    port = free_port()
+    server.startServer('', LOOPBACK, 0, port)
+    client.startClient4('test')
+    client.setServer(LOOPBACK, port)
+    deadline = time.monotonic() + 5.0
+    while not client.isConnected() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert client.isConnected()
+    yield server, client
+    client.stopClient()
+    server.stopServer()
+    ntcore.NetworkTableInstance.destroy(client)
+    ntcore.NetworkTableInstance.destroy(server)
+
+
+def read_tree(instance, prefix: str, timeout_s=2.0) -> dict:
+    """Every topic under ``prefix`` with its value, as a dashboard would see it."""
+    subscriber = ntcore.MultiSubscriber(instance, [prefix])
+    poller = ntcore.NetworkTableListenerPoller(instance)
+    poller.addListener(subscriber, ntcore.EventFlags.kValueAll | ntcore.EventFlags.kImmediate)
+    values, deadline = {}, time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        for event in poller.readQueue():
+            data = event.data
+            if hasattr(data, 'value'):
+                values[data.topic.getName()] = data.value.value()
+        time.sleep(0.05)
+    return values
+
+
+def test_the_mechanism_draws_the_arm_where_it_is(arm, nt_pair):
+    """What a dashboard reads back is a Mechanism2d whose ligaments end at the tool: from the
+    root, each ligament turned by its angle from its parent's direction."""
+    server, client = nt_pair
+    drawn = mechanism.Mechanism2dPublisher(server, arm)
+    position, setpoint = (0.7, -1.9), (2.2, 0.4)
+    drawn.show('arm', position)
+    drawn.show('setpoint', setpoint)
+    server.flush()
+    table = contract.MECHANISM_TABLE
+    tree = read_tree(client, table + '/')
+    assert tree[f'{table}/.type'] == 'Mechanism2d'
+    properties = client.getTopic(f'{table}/.type').getProperties()
+    assert properties.get('SmartDashboard') == 'Mechanism2d'
+    width, height = tree[f'{table}/dims']
+    kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+    for root, q in (('arm', position), ('setpoint', setpoint)):
+        x, y = tree[f'{table}/{root}/x'], tree[f'{table}/{root}/y']
+        heading = 0.0
+        for path in mechanism.ligament_paths(root):
+            assert tree[f'{path}/.type'] == 'line'
+            heading += math.radians(tree[f'{path}/angle'])
+            x += tree[f'{path}/length'] * math.cos(heading)
+            y += tree[f'{path}/length'] * math.sin(heading)
+        pivot = (tree[f'{table}/{root}/x'], tree[f'{table}/{root}/y'])
+        tool = kinematics.forward(q)
+        assert (x - pivot[0], y - pivot[1]) == pytest.approx(tool, abs=1e-9)
+        assert 0.0 < x < width and 0.0 < y < height
+    assert tree[f'{mechanism.ligament_paths("arm")[0]}/color'] != \
+        tree[f'{mechanism.ligament_paths("setpoint")[0]}/color']
+
+
+# ---------------------------------------------------------------------- .wpilog
+
+
+def read_wpilog(path) -> dict:
+    """{entry name: (type, metadata, [(timestamp µs, value), ...])} from a .wpilog."""
+    from wpiutil.log import DataLogReader
+    reader = DataLogReader(str(path))
+    assert reader.isValid()
+    starts, entries = {}, {}
+    for record in reader:
+        if record.isStart():
+            start = record.getStartData()
+            starts[start.entry] = start.name
+            entries[start.name] = (start.type, start.metadata, [])
+        elif not record.isControl():
+            name = starts[record.getEntry()]
+            kind = entries[name][0]
+            value = {'double[]': record.getDoubleArray, 'double': record.getDouble,
+                     'boolean': record.getBoolean, 'string': record.getString}[kind]()
+            entries[name][2].append((record.getTimestamp(), value))
+    return entries
+
+
+def test_the_wpilog_reads_back_with_names_units_times_and_values(tmp_path):
+    path = tmp_path / 'logs' / 'run.wpilog'
+    log = RunLog(path)
+    log.append(contract.POSITION.name, (0.5, -1.25), 1_000_000)
+    log.append(contract.POSITION.name, (0.6, -1.2), 1_020_000)
+    log.append(contract.BUS_VOLTAGE.name, 11.7, 1_020_000)
+    log.append(contract.ENABLED.name, True, 1_020_000)
+    log.append(contract.ARM_STATE.name, 'tracking', 1_030_000)
+    log.close()
+    entries = read_wpilog(path)
+    kind, metadata, samples = entries[contract.POSITION.name]
+    assert kind == 'double[]' and json.loads(metadata) == {'unit': 'rad'}
+    assert samples == [(1_000_000, [0.5, -1.25]), (1_020_000, [0.6, -1.2])]
+    assert entries[contract.BUS_VOLTAGE.name][2] == [(1_020_000, 11.7)]
+    assert entries[contract.ENABLED.name][2] == [(1_020_000, True)]
+    assert entries[contract.ARM_STATE.name][:1] == ('string',)
+    assert entries[contract.ARM_STATE.name][2] == [(1_030_000, 'tracking')]
+
+
+def test_an_existing_log_is_never_overwritten(tmp_path):
+    path = tmp_path / 'run.wpilog'
+    path.write_bytes(b'an older run')
+    log = RunLog(path)
+    log.close()
+    assert path.read_bytes() == b'an older run'
+    assert log.path == tmp_path / 'run_1.wpilog' and log.path.is_file()
