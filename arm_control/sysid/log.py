@@ -1,0 +1,220 @@
+"""The identification log: every sample, as a rosbag2-style MCAP file, and back.
+
+Written with ``mcap_ros2`` in the ``ros2`` profile (CDR messages, ``ros2msg`` schemas, the
+definitions rosbag2 would store), so ``ros2 bag info``/``play``, Foxglove and PlotJuggler
+open it too. Topics: ``/joint_states`` (sensor_msgs/JointState, stamped by the sensor),
+``/voltage_command`` (std_msgs/Float64MultiArray, logged when sent) and, when the robot
+publishes it, ``/battery_state`` (sensor_msgs/BatteryState).
+
+``read_log`` takes any such file or a rosbag2 directory of them (``ros2 bag record -s mcap
+/joint_states /voltage_command``): it finds the topics by name, also under a namespace.
+"""
+
+from dataclasses import dataclass, field
+import math
+from pathlib import Path
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from mcap_ros2.writer import Writer
+import numpy as np
+
+from arm_control.config import JOINT_NAMES
+
+JOINT_STATES = 'joint_states'
+VOLTAGE_COMMAND = 'voltage_command'
+BATTERY_STATE = 'battery_state'
+_TYPES = {JOINT_STATES: 'sensor_msgs/msg/JointState',
+          VOLTAGE_COMMAND: 'std_msgs/msg/Float64MultiArray',
+          BATTERY_STATE: 'sensor_msgs/msg/BatteryState'}
+
+
+@dataclass
+class Log:
+    """The samples of one run, times in seconds on the log's clock."""
+
+    joint_time_s: np.ndarray                 # (N,)
+    position_rad: np.ndarray                 # (N, 2) [shoulder, elbow]
+    velocity_rad_s: np.ndarray               # (N, 2), NaN where the message had none
+    command_time_s: np.ndarray               # (M,)
+    voltage_v: np.ndarray                    # (M, 2) as commanded
+    battery_time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    battery_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    notes: list = field(default_factory=list)   # what the reader skipped, and why
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.joint_time_s[-1] - self.joint_time_s[0]) if len(self.joint_time_s) \
+            else 0.0
+
+
+def _msgdef(type_name: str) -> str:
+    """The full definition rosbag2 stores for a type (its fields, then each nested type)."""
+    from rosbags.typesys import get_typestore, Stores
+    text, _ = get_typestore(Stores.ROS2_JAZZY).generate_msgdef(type_name, ros_version=2)
+    return text
+
+
+def _stamp(time_s: float) -> dict:
+    nanoseconds = int(round(time_s * 1e9))
+    return {'sec': nanoseconds // 1_000_000_000, 'nanosec': nanoseconds % 1_000_000_000}
+
+
+class LogWriter:
+    """Appends samples to an MCAP file; ``close`` (or leaving a ``with``) finishes it."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(self.path, 'wb')
+        self._writer = Writer(self._file)
+        self._schemas = {topic: self._writer.register_msgdef(name.replace('/msg/', '/'),
+                                                             _msgdef(name))
+                         for topic, name in _TYPES.items()}
+        self._sequence = 0
+
+    def _write(self, topic, message, time_s):
+        self._sequence += 1
+        nanoseconds = int(round(time_s * 1e9))
+        self._writer.write_message('/' + topic, self._schemas[topic], message,
+                                   log_time=nanoseconds, publish_time=nanoseconds,
+                                   sequence=self._sequence)
+
+    def joint_state(self, time_s: float, message=None, *, position=(), velocity=(),
+                    effort=()) -> None:
+        """A JointState (a message object, or built from the arrays, stamped ``time_s``)."""
+        if message is None:
+            message = {'header': {'stamp': _stamp(time_s), 'frame_id': ''},
+                       'name': list(JOINT_NAMES), 'position': [float(v) for v in position],
+                       'velocity': [float(v) for v in velocity],
+                       'effort': [float(v) for v in effort]}
+        self._write(JOINT_STATES, message, time_s)
+
+    def voltage(self, time_s: float, voltage) -> None:
+        self._write(VOLTAGE_COMMAND, {'layout': {'dim': [], 'data_offset': 0},
+                                      'data': [float(v) for v in voltage]}, time_s)
+
+    def battery(self, time_s: float, message) -> None:
+        self._write(BATTERY_STATE, message, time_s)
+
+    def close(self) -> None:
+        if not self._file.closed:
+            self._writer.finish()
+            self._file.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def write_log(path, log: Log) -> None:
+    """A whole ``Log`` to an MCAP file (what the node writes sample by sample)."""
+    with LogWriter(path) as writer:
+        for t, q, v in zip(log.joint_time_s, log.position_rad, log.velocity_rad_s):
+            writer.joint_state(t, position=q, velocity=v)
+        for t, volts in zip(log.command_time_s, log.voltage_v):
+            writer.voltage(t, volts)
+
+
+def _files(path) -> list[Path]:
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(path.glob('*.mcap'))
+        if not files:
+            raise ValueError(f'{path} holds no .mcap file')
+        return files
+    if not path.is_file():
+        raise ValueError(f'no bag at {path}')
+    return [path]
+
+
+def _pick_topic(topics, wanted):
+    """The topic named ``wanted``, or the one topic ending in /``wanted``."""
+    if '/' + wanted in topics:
+        return '/' + wanted
+    matches = sorted(t for t in topics if t.rstrip('/').split('/')[-1] == wanted)
+    if len(matches) > 1:
+        raise ValueError(f'several {wanted} topics in the bag ({", ".join(matches)}): '
+                         'keep one')
+    return matches[0] if matches else None
+
+
+def _time_s(message, log_time_ns) -> float:
+    header = getattr(message, 'header', None)
+    if header is not None and (header.stamp.sec or header.stamp.nanosec):
+        return header.stamp.sec + 1e-9 * header.stamp.nanosec
+    return log_time_ns * 1e-9
+
+
+def read_log(path) -> Log:
+    """Joint states, voltage commands and battery voltage from a bag (file or directory)."""
+    joints, commands, battery, notes = [], [], [], []
+    skipped = {JOINT_STATES: 0, VOLTAGE_COMMAND: 0, BATTERY_STATE: 0}
+    for file in _files(path):
+        with open(file, 'rb') as stream:
+            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+            summary = reader.get_summary()
+            topics = {c.topic for c in summary.channels.values()} if summary else set()
+            chosen = {kind: _pick_topic(topics, kind) for kind in _TYPES}
+            wanted = [t for t in chosen.values() if t]
+            if not wanted:
+                continue
+            for _, channel, record, message in reader.iter_decoded_messages(topics=wanted):
+                kind = next(k for k, t in chosen.items() if t == channel.topic)
+                if kind == JOINT_STATES:
+                    sample = _joint_sample(message)
+                    if sample is None:
+                        skipped[kind] += 1
+                    else:
+                        joints.append((_time_s(message, record.log_time), *sample))
+                elif kind == VOLTAGE_COMMAND:
+                    data = list(message.data)
+                    if len(data) != 2 or not all(math.isfinite(v) for v in data):
+                        skipped[kind] += 1
+                    else:
+                        commands.append((record.log_time * 1e-9, data))
+                else:
+                    if math.isfinite(message.voltage) and message.voltage > 0.0:
+                        battery.append((_time_s(message, record.log_time), message.voltage))
+                    else:
+                        skipped[kind] += 1
+    for kind, count in skipped.items():
+        if count:
+            notes.append(f'{count} {kind} messages skipped: malformed or not [shoulder, elbow]')
+    if len(joints) < 2 or len(commands) < 2:
+        raise ValueError(f'{path}: {len(joints)} joint_states and {len(commands)} '
+                         'voltage_command messages; a fit needs both topics')
+    joints.sort(key=lambda s: s[0])
+    commands.sort(key=lambda s: s[0])
+    battery.sort(key=lambda s: s[0])
+    return Log(
+        joint_time_s=np.array([s[0] for s in joints]),
+        position_rad=np.array([s[1] for s in joints]),
+        velocity_rad_s=np.array([s[2] for s in joints]),
+        command_time_s=np.array([s[0] for s in commands]),
+        voltage_v=np.array([s[1] for s in commands]),
+        battery_time_s=np.array([s[0] for s in battery]),
+        battery_v=np.array([s[1] for s in battery]),
+        notes=notes)
+
+
+def _joint_sample(message):
+    """([shoulder, elbow] positions, velocities) from a JointState, or None if unusable."""
+    names, position, velocity = list(message.name), list(message.position), \
+        list(message.velocity)
+    if names and all(n in names for n in JOINT_NAMES):
+        index = [names.index(n) for n in JOINT_NAMES]
+    elif not names and len(position) == 2:
+        index = [0, 1]
+    else:
+        return None
+    if len(position) != len(names or position) or max(index) >= len(position):
+        return None
+    q = [position[i] for i in index]
+    v = ([velocity[i] for i in index] if len(velocity) == len(position)
+         else [math.nan, math.nan])
+    if not all(math.isfinite(x) for x in q):
+        return None
+    return q, v
