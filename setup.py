@@ -32,6 +32,7 @@ setup(
             'markers = arm_control.nodes.markers:main',
             'recorder = arm_control.nodes.recorder:main',
             'plot_run = arm_control.visual.plots:main',
+            'sysid = arm_control.nodes.sysid:main',
         ],
     },
 )

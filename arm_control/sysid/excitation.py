@@ -2,17 +2,18 @@
 
 As WPILib's SysId does per mechanism, each joint in turn makes quasistatic sweeps (its speed
 ramped slowly up and down, so gravity and friction dominate: p1, p2, b, c) and dynamic steps
-(fast rest-to-rest moves: the inertias α, γ); then both joints move together in a multi-sine
+(fast rest-to-rest moves: the inertias α, γ); both joints also move together in a multi-sine
 (the coupling and Coriolis terms, and every parameter at once). All of it moves about a
-centre configuration and returns there between parts.
+centre configuration and returns there between parts. (``session`` runs the sweeps and the
+multi-sine first, and designs the steps with what they taught.)
 
 Before anything is driven, ``design_excitation`` samples every part every 5 ms and checks it
-with the robot file's model: clear of forbidden space by ``margin_rad`` on both joints, and
-with the feedforward needing at most ``design_current_fraction`` of ``max_current_a`` per
-motor (the rest is room for a wrong model and for feedback). A part that fails is made
-smaller (and a step slower) until it passes, or dropped; each change is reported.
+with the model it is given: clear of forbidden space by ``margin_rad`` on both joints, and
+with the feedforward needing at most a share of ``max_current_a`` per motor (the rest is
+room for feedback and for the model being wrong). A part that fails is made smaller (and a
+step slower) until it passes, or dropped; each change is reported.
 
-``ExcitationRun`` tracks it: the file's inverse dynamics as feedforward plus PD on the
+``ExcitationRun`` tracks it: the model's inverse dynamics as feedforward plus PD on the
 joint_states, every command clamped so that no motor draws more than ``max_current_a``
 (|V − G·ω/Kv|/R per motor) -- under the motor controllers' own limit, so every command is
 applied as sent and the log holds the voltage the arm really got. It stops (and glides back
@@ -195,7 +196,8 @@ def feedforward(dynamics: ArmDynamics, q, qd, qdd) -> np.ndarray:
 
 
 def check_segments(segments, arm: ArmConfig, settings: SysIdConfig,
-                   forbidden: ForbiddenSpace, dynamics: ArmDynamics) -> str | None:
+                   forbidden: ForbiddenSpace, dynamics: ArmDynamics,
+                   current_share: float) -> str | None:
     """Why the motion is unsafe to drive (a sentence), or None when it is safe."""
     for segment in segments:
         t = np.arange(0.0, segment.duration_s + CHECK_STEP_S, CHECK_STEP_S)
@@ -210,7 +212,7 @@ def check_segments(segments, arm: ArmConfig, settings: SysIdConfig,
         if np.max(np.abs(voltage)) > limit_v:
             return (f'its feedforward needs {np.max(np.abs(voltage)):.1f} V, more than '
                     f'{limit_v:.1f} V')
-        allowed_a = settings.design_current_fraction * settings.max_current_a
+        allowed_a = current_share * settings.max_current_a
         for joint in range(2):
             current = np.abs(per_motor_current_a(dynamics, arm, joint, voltage[:, joint],
                                                  qd[:, joint]))
@@ -256,14 +258,22 @@ def _multisine(centre, settings, scale):
             Hold(centre, PAUSE_S))
 
 
-def design_excitation(arm: ArmConfig, settings: SysIdConfig, start_rad=None):
+QUASISTATIC, MULTISINE, DYNAMIC = 'quasistatic', 'multi-sine', 'dynamic'
+
+
+def design_excitation(arm: ArmConfig, settings: SysIdConfig, start_rad=None,
+                      kinds=(QUASISTATIC, MULTISINE, DYNAMIC), current_share=None):
     """The excitation about ``settings.centre_rad``, every part checked and shrunk until safe.
 
-    Returns ``(Excitation, notes)``; with ``start_rad`` (where the arm is) it begins with a
-    gentle move from there to the centre, checked free of forbidden space (no margin: the
-    arm may rest near it). Raises ValueError if the centre or that move is unsafe, or if no
-    part can be made safe.
+    ``kinds`` picks the parts, in this order: each joint's quasistatic sweeps, the coupled
+    multi-sine, each joint's dynamic steps. Returns ``(Excitation, notes)``; with
+    ``start_rad`` (where the arm is) it begins with a gentle move from there to the centre,
+    checked free of forbidden space (no margin: the arm may rest near it). Raises
+    ValueError if the centre or that move is unsafe, or if no part can be made safe.
+    The feedforward may need ``current_share`` of ``max_current_a`` (default: stage 1's).
     """
+    if current_share is None:
+        current_share = settings.stage_one_current_share
     dynamics = ArmDynamics(arm)
     forbidden = ForbiddenSpace(arm, settings.margin_rad)
     centre = np.array(settings.centre_rad, float)
@@ -288,22 +298,24 @@ def design_excitation(arm: ArmConfig, settings: SysIdConfig, start_rad=None):
     builders = []
     for joint, name in enumerate(('shoulder', 'elbow')):
         reach = settings.quasistatic_range_rad[joint]
-        if reach > 0.0:
-            builders.append((f'{name} quasistatic',
+        if QUASISTATIC in kinds and reach > 0.0:
+            builders.append((f'{name} {QUASISTATIC}',
                              lambda s, j=joint, r=reach: _sweeps(centre, j, r * s, settings)))
+    if (MULTISINE in kinds and settings.multisine_time_s > 0.0
+            and max(settings.multisine_amplitude_rad) > 0.0):
+        builders.append((f'coupled {MULTISINE}', lambda s: _multisine(centre, settings, s)))
     for joint, name in enumerate(('shoulder', 'elbow')):
         reach = settings.dynamic_step_rad[joint]
-        if reach > 0.0:
-            builders.append((f'{name} dynamic', lambda s, j=joint, r=reach: _steps(
+        if DYNAMIC in kinds and reach > 0.0:
+            builders.append((f'{name} {DYNAMIC}', lambda s, j=joint, r=reach: _steps(
                 centre, j, r * math.sqrt(s), settings.dynamic_step_time_s / math.sqrt(s))))
-    if settings.multisine_time_s > 0.0 and max(settings.multisine_amplitude_rad) > 0.0:
-        builders.append(('coupled multi-sine', lambda s: _multisine(centre, settings, s)))
 
     for name, build in builders:
         scale = 1.0
         for _ in range(SHRINK_TRIES + 1):
             segments = build(scale)
-            problem = check_segments(segments, arm, settings, forbidden, dynamics)
+            problem = check_segments(segments, arm, settings, forbidden, dynamics,
+                                     current_share)
             if problem is None:
                 break
             scale *= SHRINK
@@ -313,7 +325,7 @@ def design_excitation(arm: ArmConfig, settings: SysIdConfig, start_rad=None):
         if scale < 1.0:
             notes.append(f'{name}: at {scale:.0%} of its size, to keep it safe')
         parts.append(Part(name, segments))
-    if not any(part.name != 'to the centre' for part in parts):
+    if builders and not any(part.name != 'to the centre' for part in parts):
         raise ValueError('no part of the excitation can be made safe: ' + '; '.join(notes))
     return Excitation(parts), notes
 
@@ -339,6 +351,7 @@ class ExcitationRun:
         self.motion_began_s = 0.0
         self.stopped = None                   # the reason, once stopped early
         self.current_clamped = 0              # commands the current limit changed
+        self.reference = None                 # (q, q̇) the last command was computed for
 
     def elapsed_s(self, now_s) -> float:
         return 0.0 if self.began_s is None else now_s - self.began_s
@@ -362,6 +375,7 @@ class ExcitationRun:
             if problem is not None:
                 self.stop(now_s, position, problem)
                 q_ref, qd_ref, qdd_ref = (v[0] for v in self.motion.sample(0.0))
+        self.reference = (q_ref, qd_ref)
         voltage = (np.array(self.dynamics.voltage_for(q_ref, qd_ref, qdd_ref))
                    + self.gains[:, 0] * (q_ref - position)
                    + self.gains[:, 1] * (qd_ref - velocity))

@@ -33,7 +33,7 @@ shape from the robot file -- its radius of gyration about its centre of mass, kÂ
 and solves mass, centre of mass and inertia from Ï€; weigh a link to know its mass.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -186,3 +186,13 @@ def realise(base, nominal: ArmConfig) -> Realisation:
                 value = 0.0
             values[f'{joint}.{field}'] = value
     return Realisation(values, tuple(notes))
+
+
+def with_values(arm: ArmConfig, values: dict) -> ArmConfig:
+    """``arm`` with ``{'joint.field': value}`` changed (what a parameter overlay does)."""
+    joints = {}
+    for name, value in values.items():
+        joint, field = name.split('.')
+        joints.setdefault(joint, {})[field] = value
+    return replace(arm, **{joint: replace(getattr(arm, joint), **fields)
+                           for joint, fields in joints.items()})

@@ -23,13 +23,15 @@ class SysIdConfig:
     multisine_time_s: float
     margin_rad: float
     max_current_a: float
-    design_current_fraction: float
+    stage_one_current_share: float
+    stage_two_current_share: float
     shoulder_pd: tuple[float, float]
     elbow_pd: tuple[float, float]
     abort_tracking_error_rad: float
     joint_state_timeout_s: float
     smoothing_window_s: float
     max_command_lag_s: float
+    min_speed_rad_s: float
     random_seed: int
 
     @property
@@ -73,7 +75,9 @@ class SysIdConfig:
             multisine_time_s=read.nonnegative('multisine_time_s'),
             margin_rad=read.number('margin_rad', low=0.0, high=0.5),
             max_current_a=read.positive('max_current_a'),
-            design_current_fraction=read.number('design_current_fraction', low=0.0, high=1.0,
+            stage_one_current_share=read.number('stage_one_current_share', low=0.0, high=1.0,
+                                                low_open=True),
+            stage_two_current_share=read.number('stage_two_current_share', low=0.0, high=1.0,
                                                 low_open=True),
             shoulder_pd=nonnegative_pair('shoulder_pd'),
             elbow_pd=nonnegative_pair('elbow_pd'),
@@ -81,5 +85,6 @@ class SysIdConfig:
             joint_state_timeout_s=read.positive('joint_state_timeout_s'),
             smoothing_window_s=read.positive('smoothing_window_s'),
             max_command_lag_s=read.number('max_command_lag_s', low=0.0, high=0.5),
+            min_speed_rad_s=read.nonnegative('min_speed_rad_s'),
             random_seed=read.integer('random_seed', low=0),
         )
