@@ -137,12 +137,15 @@ def _link_from_moments(moment, inertia, shape_k2, name):
 def realise(base, nominal: ArmConfig) -> Realisation:
     """Masses, centres of mass and inertias (and friction) that realise π exactly.
 
-    Each link keeps the nominal file's radius of gyration about its centre of mass; the
-    forearm is solved first from p2 and γ, then the upper arm from p1 − mb·La and
-    α − γ − mb·La². A link whose first moment is zero keeps its nominal mass, with its
-    centre of mass on the joint. Friction below zero (noise about a frictionless joint) is
-    written as 0. Raises ``RealisationError`` when π holds a negative moment or inertia,
-    which arm.yaml cannot describe (centres of mass are distances from the joint, >= 0).
+    Each link keeps the nominal file's radius of gyration about its centre of mass where it
+    can; the forearm is solved first from p2 and γ, then the upper arm from p1 − mb·La and
+    α − γ − mb·La². The forearm's mass must lie between p2²/γ (inertia about its centre
+    of mass ≥ 0) and what leaves the upper arm a moment and an inertia ≥ 0 (mb·La ≤ p1,
+    mb·La² < α − γ); outside that, it is moved to the nearer end, with a note. A link whose
+    first moment is zero keeps its nominal mass, with its centre of mass on the joint.
+    Friction below zero (noise about a frictionless joint) is written as 0. Raises
+    ``RealisationError`` when no arm in arm.yaml's terms has these π (centres of mass are
+    distances from the joint, >= 0, and inertias are positive).
     """
     alpha, gamma, p1, p2 = (float(v) for v in base[:4])
     la = nominal.shoulder.length_m
@@ -155,18 +158,29 @@ def realise(base, nominal: ArmConfig) -> Realisation:
         raise RealisationError(
             f'the identified forearm moment mb rb = {p2:.4g} kg m puts its centre of mass '
             'behind the elbow, which com_from_joint_m >= 0 cannot describe')
+    if gamma <= 0.0:
+        raise RealisationError(f'the identified forearm inertia about the elbow, '
+                               f'{gamma:.4g} kg m^2, is not positive')
+    p2 = max(p2, 0.0)
+    lightest = p2 ** 2 / gamma
+    heaviest = min(p1 / la, (1.0 - 1e-9) * (alpha - gamma) / la ** 2)
+    if heaviest < lightest or heaviest <= 0.0:
+        raise RealisationError(
+            f'no forearm mass fits the identified moments and inertias (alpha = {alpha:.4g}, '
+            f'gamma = {gamma:.4g} kg m^2, p1 = {p1:.4g}, p2 = {p2:.4g} kg m): it would need '
+            f'at least {lightest:.4g} kg and at most {heaviest:.4g} kg')
     fore = _link_from_moments(p2, gamma, k2(nominal.elbow), 'forearm')
     if fore is None:
         fore = (nominal.elbow.mass_kg, 0.0, gamma, "the forearm's centre of mass is on the "
                 "elbow: its mass is not seen, the file's is kept")
-    mb = fore[0]
-    upper_moment = p1 - mb * la
+    mb = min(max(fore[0], lightest), heaviest)
+    if mb != fore[0]:
+        radius = p2 / mb if mb > 0.0 else 0.0
+        fore = (mb, radius, max(gamma - mb * radius ** 2, 0.0),
+                f"the forearm cannot keep its file's shape (that would make it {fore[0]:.4g} "
+                f'kg, beyond what the moments allow): written as {mb:.4g} kg')
+    upper_moment = max(p1 - mb * la, 0.0)
     upper_inertia = alpha - gamma - mb * la ** 2
-    if upper_moment < -1e-6 * max(abs(p1), 1e-9):
-        raise RealisationError(
-            f'the identified shoulder moment p1 = {p1:.4g} kg m is less than the forearm mass '
-            f'at the elbow, mb La = {mb * la:.4g} kg m: the upper arm centre of mass '
-            'would lie behind the shoulder')
     upper = _link_from_moments(upper_moment, upper_inertia, k2(nominal.shoulder), 'upper arm')
     if upper is None:
         upper = (nominal.shoulder.mass_kg, 0.0, upper_inertia,

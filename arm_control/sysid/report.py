@@ -87,8 +87,8 @@ def overlay_yaml(realisation: Realisation, fit: FitResult, nominal: ArmConfig,
         for field, unit in PHYSICAL:
             name = f'{joint}.{field}'
             value, spread = realisation.values[name], sigma.get(name, math.nan)
-            text = f'      {field}: {_number(value, spread)}'
-            lines.append(f'{text:<44}# +/- {_number(spread)} {unit} (1 sigma)')
+            text = f'      {field}: {value:.6g}'       # enough digits to give π back
+            lines.append(f'{text:<46}# +/- {_number(spread)} {unit} (1 sigma)')
     return '\n'.join(lines) + '\n'
 
 
