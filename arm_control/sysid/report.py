@@ -141,14 +141,22 @@ def plot_fit(fit: FitResult, path, *, title: str = '', size_px=(1100, 760),
     figure = Figure(figsize=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi)
     FigureCanvasAgg(figure)
     axes = figure.subplots(3, 1, sharex=True, gridspec_kw={'height_ratios': (3, 3, 2)})
+    # Lines break where the log has a gap (or the fit left samples out).
+    steps = np.diff(fit.time_s)
+    gap = np.concatenate([[False], steps > 1.5 * np.median(steps)]) if len(steps) else []
+
+    def broken(values):
+        return np.where(gap, np.nan, values)
+
     for j, (ax, name) in enumerate(zip(axes[:2], ('shoulder', 'elbow'))):
         ax.plot(fit.time_s, fit.measured_v[:, j], '.', color='0.35', markersize=2,
                 label='measured (filtered command)')
-        ax.plot(fit.time_s, fit.predicted_v[:, j], '-', color=JOINT_COLOURS[j], linewidth=1.0,
+        ax.plot(fit.time_s, broken(fit.predicted_v[:, j]), '-', color=JOINT_COLOURS[j],
+                linewidth=1.0,
                 label=f'identified model (RMS error {fit.residual_rms_v[j]:.3f} V)')
         nominal_rms = math.sqrt(float(np.mean((fit.nominal_v[:, j] - fit.measured_v[:, j])
                                               ** 2)))
-        ax.plot(fit.time_s, fit.nominal_v[:, j], '--', color='0.6', linewidth=0.8,
+        ax.plot(fit.time_s, broken(fit.nominal_v[:, j]), '--', color='0.6', linewidth=0.8,
                 label=f'robot file (RMS error {nominal_rms:.3f} V)')
         ax.set_ylabel(f'{name} voltage (V)')
         ax.legend(loc='upper right', fontsize=8)
