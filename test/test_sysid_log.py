@@ -1,10 +1,13 @@
 """The identification log: MCAP written and read back, from a bag as ros2 bag would record it."""
 
+import dataclasses
+
 from mcap_ros2.writer import Writer
 import numpy as np
 import pytest
 
-from arm_control.sysid.log import _msgdef, Log, read_log, write_log
+from arm_control.sysid.fit import applied_voltage
+from arm_control.sysid.log import _msgdef, Log, LogWriter, read_log, write_log
 
 
 def a_log(rng) -> Log:
@@ -79,3 +82,40 @@ def test_a_bag_without_commands_says_what_is_missing(tmp_path):
         read_log(directory)
     with pytest.raises(ValueError, match='no bag at'):
         read_log(tmp_path / 'missing.mcap')
+
+
+def test_the_nodes_messages_are_logged_as_they_are(tmp_path):
+    """The node writes rclpy's JointState and BatteryState objects directly."""
+    from sensor_msgs.msg import BatteryState, JointState
+    with LogWriter(tmp_path / 'log.mcap') as writer:
+        for k in range(10):
+            t = 50.0 + 0.02 * k
+            state = JointState(name=['elbow', 'shoulder'], position=[-1.0, 0.1 * k],
+                               velocity=[0.0, 0.5])
+            state.header.stamp.sec, state.header.stamp.nanosec = 50, 20_000_000 * k
+            writer.joint_state(t, state)
+            writer.voltage(t, [6.0, -3.0])
+            battery = BatteryState(voltage=11.0 - 0.1 * k, current=-30.0)
+            battery.header.stamp = state.header.stamp
+            writer.battery(t, battery)
+    log = read_log(tmp_path / 'log.mcap')
+    assert np.allclose(log.position_rad, [[0.1 * k, -1.0] for k in range(10)])
+    assert np.allclose(log.velocity_rad_s, [[0.5, 0.0]] * 10)
+    assert np.allclose(log.battery_v, 11.0 - 0.1 * np.arange(10))
+
+
+def test_the_voltage_the_arm_got_is_the_command_held_and_at_most_the_battery():
+    """Zero-order hold from ``lag`` after sending, averaged over each interval; a sagging
+    battery caps it."""
+    log = Log(joint_time_s=np.zeros(0), position_rad=np.zeros((0, 2)),
+              velocity_rad_s=np.zeros((0, 2)), command_time_s=np.array([0.0, 0.02, 0.04]),
+              voltage_v=np.array([[2.0, 4.0], [6.0, -12.0], [0.0, 0.0]]))
+    start, end = np.array([0.0, 0.01, 0.02]), np.array([0.02, 0.03, 0.04])
+    mean, inside = applied_voltage(log, start, end, 0.0)
+    assert np.allclose(mean, [[2.0, 4.0], [4.0, -4.0], [6.0, -12.0]])
+    mean, _ = applied_voltage(log, start, end, 0.01)            # 10 ms later
+    assert np.allclose(mean[1], [2.0, 4.0]) and np.all(inside)
+    sagging = dataclasses.replace(log, battery_time_s=np.array([0.0, 0.04]),
+                                  battery_v=np.array([9.0, 9.0]))
+    mean, _ = applied_voltage(sagging, start, end, 0.0)
+    assert np.allclose(mean[2], [6.0, -9.0])

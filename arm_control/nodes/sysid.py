@@ -3,7 +3,7 @@
 Runs in place of the controller: it refuses to start while another node publishes
 ``voltage_command``, and stops if one appears. Subscribes ``joint_states`` (JointState) and
 ``battery_state`` (BatteryState, when the robot publishes it); publishes ``voltage_command``
-(Float64MultiArray), one command for each joint state, at most ``loop_rate_hz``, and
+(Float64MultiArray), one command for each joint state (at most twice ``loop_rate_hz``), and
 ``~/reference`` (JointState: the planned position and velocity each command was computed
 for). It waits for the joint states, designs stage 1 of the excitation about ``centre_rad``
 from where the arm is (checked clear of forbidden space and within the current before
