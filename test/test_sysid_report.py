@@ -29,7 +29,7 @@ def a_fit(parameters, relative_sigma=0.01) -> FitResult:
     volts = np.column_stack([np.sin(t), np.cos(t)])
     return FitResult(
         parameters=parameters, covariance=np.diag((relative_sigma * parameters + 1e-3) ** 2),
-        lag_s=0.001, lag_sigma_s=0.0005, residual_rms_nm=np.array([5.0, 2.0]),
+        lag_s=0.001, lag_sigma_s=0.0005, instrumented=True, residual_rms_nm=np.array([5.0, 2.0]),
         residual_rms_v=np.array([0.08, 0.06]), measured_rms_v=np.array([1.7, 2.3]),
         samples=200, duration_s=10.0, condition_number=4.0, time_s=t, measured_v=volts,
         predicted_v=volts + 0.05, nominal_v=0.5 * volts)

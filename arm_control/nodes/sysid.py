@@ -256,6 +256,10 @@ class SysIdNode(Node):
             f'fitted {fit.samples} samples; residual RMS shoulder {fit.residual_rms_v[0]:.3f} V'
             f', elbow {fit.residual_rms_v[1]:.3f} V; command lag {1000 * fit.lag_s:+.1f} ms; '
             f'report {result.report_file}, plot {result.plot_file}')
+        if not fit.instrumented:
+            self.get_logger().warning(
+                'the log holds no plan (/sysid/reference): fitted by least squares, whose '
+                'inertias the sensor noise pulls low in closed loop')
         if result.parameter_file is None:
             self.finish(f'no parameter file: {result.error}')
             return

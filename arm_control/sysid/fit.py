@@ -213,6 +213,7 @@ class FitResult:
     covariance: np.ndarray               # (8, 8)
     lag_s: float
     lag_sigma_s: float
+    instrumented: bool                   # instruments from the logged plan, else least squares
     residual_rms_nm: np.ndarray          # per joint
     residual_rms_v: np.ndarray           # the same, as motor voltage
     measured_rms_v: np.ndarray           # the (filtered) voltage's own spread, per joint
@@ -322,6 +323,7 @@ def fit_log(log: Log, arm: ArmConfig, window_s: float, max_lag_s: float,
     times = filtered.time_s[inside]
     return FitResult(
         parameters=estimate, covariance=covariance, lag_s=float(lag), lag_sigma_s=lag_sigma,
+        instrumented=planned is not None,
         residual_rms_nm=residual_nm, residual_rms_v=residual_nm / coefficients[:, 0],
         measured_rms_v=np.std(measured, axis=0), samples=int(np.any(use, axis=1).sum()),
         duration_s=float(times[-1] - times[0]),

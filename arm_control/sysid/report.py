@@ -97,10 +97,13 @@ def report_markdown(fit: FitResult, realisation: Realisation | None, nominal: Ar
     """The fit in words and tables: parameters ±1σ beside the robot file's, the residuals."""
     file_values = base_parameters(nominal)
     true_values = base_parameters(truth) if truth is not None else None
+    estimator = ('instrumental variables from the logged plan' if fit.instrumented else
+                 'least squares: the log holds no plan (/sysid/reference), and in closed loop '
+                 'the sensor noise pulls the inertias low')
     lines = [f'# System identification: {source}', '',
              f'{fit.samples} samples over {fit.duration_s:.1f} s; command-to-motion lag '
-             f'{1000 * fit.lag_s:+.0f} ms; condition number of the (column-scaled) regressor '
-             f'{fit.condition_number:.1f}.', '',
+             f'{1000 * fit.lag_s:+.1f} ± {1000 * fit.lag_sigma_s:.1f} ms; condition number of '
+             f'the (column-scaled) regressor {fit.condition_number:.1f}; {estimator}.', '',
              '## Base parameters', '',
              '| parameter | what | robot file | identified | ±1σ |'
              + (' true |' if truth is not None else ''),
