@@ -25,6 +25,7 @@ with sensor noise, physics on 1 ms steps:
     python bench/bench_sysid.py --file /tmp/arm_sysid/identified_params.yaml
                                                   # ... with a file from a run of the node
     python bench/bench_sysid.py --no-controller   # 1 and 2 only
+    python bench/bench_sysid.py --seeds 12        # only: is the stated ±1σ honest?
 """
 
 from contextlib import contextmanager
@@ -152,11 +153,35 @@ def fmt(value, spec='.2f'):
     return 'n/a' if value is None or not math.isfinite(value) else format(value, spec)
 
 
+def coverage(truth, default, settings, seeds):
+    """Identify the demo arm with ``seeds`` sensor-noise seeds: how far each estimate falls
+    from the truth in its own σ, and how the estimates spread against the σ stated."""
+    estimates, sigmas = [], []
+    for seed in range(seeds):
+        run = identification_run(truth, default, settings, seed=100 + seed)
+        fit = fit_log(run.log, default, settings.smoothing_window_s,
+                      settings.max_command_lag_s, settings.min_speed_rad_s)
+        estimates.append(fit.parameters)
+        sigmas.append(fit.standard_errors)
+    estimates, sigmas = np.array(estimates), np.array(sigmas)
+    z = (estimates - base_parameters(truth)) / sigmas
+    print(f'{seeds} identification runs of the demo arm (sensor-noise seeds 100 to '
+          f'{99 + seeds}):')
+    print('| base parameter | largest error / σ | mean error / σ | spread / mean σ |')
+    print('|---|---|---|---|')
+    for k, (name, unit, _) in enumerate(BASE_PARAMETERS):
+        print(f'| {name} ({unit}) | {np.max(np.abs(z[:, k])):.1f} | {np.mean(z[:, k]):+.2f} | '
+              f'{np.std(estimates[:, k]) / np.mean(sigmas[:, k]):.2f} |')
+
+
 def main(argv):
     file = argv[argv.index('--file') + 1] if '--file' in argv else None
     default, truth, identified = arms(file)
     settings = SysIdConfig.from_parameters(config.read_parameter_file(CONFIG / 'arm.yaml',
                                                                       'sysid'))
+    if '--seeds' in argv:
+        coverage(truth, default, settings, int(argv[argv.index('--seeds') + 1]))
+        return
     # 1. identification
     began = time.process_time()
     run = identification_run(truth, default, settings, seed=0)

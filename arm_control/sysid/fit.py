@@ -27,8 +27,9 @@ the direction of travel.
 Uncertainty: the filter makes neighbouring residuals alike, so the covariance is the
 Newey-West (HAC) estimate, B·S·Bᵀ with B = (ZᵀX)⁻¹ and S summing score products over four
 filter windows of rows (Bartlett weights), not the textbook σ²(XᵀX)⁻¹, which would claim
-several times the precision the data hold. Over 12 seeded runs on the demo arm every
-parameter fell within 2.2σ of the truth, and the estimates spread less than the stated σ.
+several times the precision the data hold. Over 12 seeded runs on the demo arm
+(``bench/bench_sysid.py --seeds 12``) the estimates spread by 0.4-1.0 of their stated σ,
+except α's, by 1.3: its σ is a quarter too small.
 """
 
 from dataclasses import dataclass
@@ -46,6 +47,7 @@ POLYORDER = 3
 GAP_PERIODS = 2.5          # a step longer than this many sample periods splits the log
 LAG_STEPS = 17             # lags tried across ±max_command_lag_s
 MIN_SAMPLES = 50
+HAC_WINDOWS = 2             # residuals are taken as correlated over this many filter windows
 VISCOUS_COLUMNS = ((0, 4), (1, 6))     # (row, column) of b_a·θ̇a and b_b·θ̇b in Y
 
 
@@ -304,7 +306,7 @@ def fit_log(log: Log, arm: ArmConfig, window_s: float, max_lag_s: float,
     rows = use.reshape(-1)
     weighted = design_rows * (weights * rows)[:, None]
     covariance = hac_covariance(
-        weighted, residual * weights * rows, 4 * len(filtered.weights),
+        weighted, residual * weights * rows, HAC_WINDOWS * 2 * len(filtered.weights),
         None if instrument_rows is None else instrument_rows * (weights * rows)[:, None])
     lag_sigma = math.sqrt(covariance[-1, -1]) if with_lag else 0.0
     if with_lag:
