@@ -34,6 +34,7 @@ setup(
             'plot_run = arm_control.visual.plots:main',
             'frc_bridge = arm_control.nodes.frc_bridge:main',
             'frc_robot_sim = arm_control.frc.robot_sim:main',
+            'sysid = arm_control.nodes.sysid:main',
         ],
     },
 )

@@ -64,12 +64,13 @@ def read_parameter_files(paths, node_name: str) -> dict[str, Any]:
     return flat
 
 
-def parameter_descriptions(path) -> dict[str, str]:
-    """Each parameter's description: the comment on its line of the file, else its section's.
+def parameter_descriptions(path, node_name: str) -> dict[str, str]:
+    """Each of ``node_name``'s parameters' description: the comment on its line of the file,
+    else its section's; the node's own section's over ``/**``'s (names repeat across nodes).
 
     The comments in ``config/arm.yaml`` are the one place a parameter is described.
     """
-    descriptions: dict[str, str] = {}
+    by_section: dict[str, dict[str, str]] = {}
     stack: list[tuple[int, str, str]] = []      # (indent, key, comment) of open sections
     for line in Path(path).read_text().splitlines():
         match = re.match(r'^(\s*)([\w/*]+):\s*([^#]*?)\s*(?:#\s*(.*))?$', line)
@@ -78,13 +79,14 @@ def parameter_descriptions(path) -> dict[str, str]:
         indent, key, value, comment = len(match[1]), match[2], match[3], match[4] or ''
         while stack and stack[-1][0] >= indent:
             stack.pop()
-        if value:
-            names = [k for _, k, _ in stack if not k.startswith('/') and k != 'ros__parameters']
+        if value and stack:
+            names = [k for _, k, _ in stack[1:] if k != 'ros__parameters']
             inherited = next((c for _, _, c in reversed(stack) if c), '')
-            descriptions['.'.join(names + [key])] = comment or inherited
-        else:
+            section = by_section.setdefault(stack[0][1].strip('/'), {})
+            section['.'.join(names + [key])] = comment or inherited
+        elif not value:
             stack.append((indent, key, comment))
-    return descriptions
+    return {**by_section.get('**', {}), **by_section.get(node_name, {})}
 
 
 def _flatten(tree: dict, prefix: str, out: dict) -> None:

@@ -25,9 +25,9 @@ def flatten(tree, prefix=''):
 
 
 def table(path=ROOT / 'config' / 'arm.yaml') -> str:
-    descriptions = parameter_descriptions(path)
     lines = []
     for section, body in yaml.safe_load(path.read_text()).items():
+        descriptions = parameter_descriptions(path, section.strip('/'))
         who = 'every node' if section == '/**' else f'`{section.strip("/")}`'
         lines += ['', f'{who} (`{section}`):', '',
                   '| parameter | default | meaning |', '|---|---|---|']

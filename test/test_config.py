@@ -107,8 +107,8 @@ def test_unreadable_file_is_a_clear_error(tmp_path):
 
 def test_every_parameter_has_a_description():
     path = parameters.default_parameter_file()
-    descriptions = parameters.parameter_descriptions(path)
-    for node in ('sim', 'controller', 'planner'):
+    for node in ('sim', 'controller', 'planner', 'tour', 'viewer', 'recorder', 'sysid'):
+        descriptions = parameters.parameter_descriptions(path, node)
         for name in read_parameter_file(path, node):
             assert descriptions.get(name), f'{name} has no comment in {path.name}'
 

@@ -18,7 +18,7 @@ from conftest import with_joint
 import numpy as np
 import pytest
 
-from arm_control import config
+from arm_control import config, parameters
 from arm_control.bringup import node_parameters
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.visual.urdf import arm_urdf, joint_limits
@@ -186,7 +186,8 @@ def bring_up(launch_description, **arguments):
     """What the launch starts for these arguments (the rest at their defaults)."""
     (opaque,) = [e for e in launch_description.args[0]
                  if type(e).__name__ == 'OpaqueFunction']
-    context = {'params_file': ARM_YAML, 'robot_params_file': '', 'namespace': '', **arguments}
+    context = {'params_file': ARM_YAML, 'robot_params_file': '', 'namespace': '',
+               'sim_speed': '0.0', **arguments}
     Recorded.built.clear()
     return opaque.kwargs['function'](context)
 
@@ -270,7 +271,7 @@ def test_robot_state_publisher_gets_the_urdf_of_the_files(launch_description, ar
 def test_a_bad_parameter_file_starts_no_node(launch_description, tmp_path, robot_file, words):
     robot = tmp_path / 'robot.yaml'
     robot.write_text(robot_file)
-    with pytest.raises(config.ParameterError) as refused:
+    with pytest.raises(parameters.ParameterError) as refused:
         bring_up(launch_description, robot_params_file=str(robot))
     assert words in str(refused.value) and str(robot) in str(refused.value)
     assert 'no node started' in str(refused.value)
@@ -278,7 +279,8 @@ def test_a_bad_parameter_file_starts_no_node(launch_description, tmp_path, robot
 
 
 def test_a_missing_parameter_file_starts_no_node(launch_description, tmp_path):
-    with pytest.raises(config.ParameterError, match='cannot read parameter file .*absent.yaml'):
+    with pytest.raises(parameters.ParameterError,
+                       match='cannot read parameter file .*absent.yaml'):
         bring_up(launch_description, params_file=str(tmp_path / 'absent.yaml'))
     assert not [a for a in Recorded.built if type(a).__name__ == 'Node']
 

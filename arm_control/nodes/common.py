@@ -50,7 +50,7 @@ def declare_parameters(node, node_name: str, tunable=(), on_change=None) -> dict
     """
     path = default_parameter_file()
     defaults = read_parameter_file(path, node_name)
-    descriptions = parameter_descriptions(path)
+    descriptions = parameter_descriptions(path, node_name)
     declared = []
 
     def declare(name, value):

@@ -1,0 +1,332 @@
+"""The ``sysid`` node: drives the arm through a safe excitation, logs it, fits the model.
+
+Runs in place of the controller: it refuses to start while another node publishes
+``voltage_command``, and stops if one appears. Subscribes ``joint_states`` (JointState) and
+``battery_state`` (BatteryState, when the robot publishes it); publishes ``voltage_command``
+(Float64MultiArray), one command for each joint state (at most twice ``loop_rate_hz``), and
+``~/reference`` (JointState: the planned position and velocity each command was computed
+for). It waits for the joint states, designs stage 1 of the excitation about ``centre_rad``
+from where the arm is (checked clear of forbidden space and within the current before
+anything moves), drives it, fits it while holding the arm at the centre, drives stage 2
+with that fit's model, writes every sample to ``<output_directory>/log.mcap``, then fits
+the whole log while holding the arm, writes ``identified_params.yaml``, ``report.md`` and
+``fit.png`` there, and exits (0 V on the way out, as a disabled robot). With
+``fit_only_bag`` set it drives nothing: it fits that bag. Exit code 0 when a parameter file
+was written, 1 otherwise.
+"""
+
+from concurrent.futures import ThreadPoolExecutor
+import math
+from pathlib import Path
+import signal
+import sys
+
+import numpy as np
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.signals import uninstall_signal_handlers
+from sensor_msgs.msg import BatteryState, JointState
+from std_msgs.msg import Float64MultiArray, Header
+
+from arm_control.config import ArmConfig, JOINT_NAMES
+from arm_control.nodes.common import COMMANDS, declare_parameters, finite, run, STATE_STREAM
+from arm_control.nodes.viewer import joint_positions
+from arm_control.sysid.log import Log, LogWriter, read_log
+from arm_control.sysid.report import identify
+from arm_control.sysid.session import provisional_model, Session
+from arm_control.sysid.settings import SysIdConfig
+
+DISCOVERY_S = 1.0           # joint states for this long before driving: other publishers show
+SHUTDOWN_ACK_S = 0.5        # at most this long on exit for the 0 V command to arrive
+LOG_NAME = 'log.mcap'
+
+
+def _stamp_s(msg) -> float | None:
+    stamp = msg.header.stamp
+    return stamp.sec + 1e-9 * stamp.nanosec if (stamp.sec or stamp.nanosec) else None
+
+
+class SysIdNode(Node):
+
+    def __init__(self):
+        super().__init__('sysid')
+        params = declare_parameters(self, 'sysid')
+        self.arm = ArmConfig.from_parameters(params)
+        self.settings = SysIdConfig.from_parameters(params)
+        self.directory = Path(self.settings.output_directory)
+        self.period_s = 1.0 / self.settings.loop_rate_hz
+        self.exit_code = 1
+        self.phase = 'waiting'   # → driving → (stage-1 fit) → driving → fitting → done
+        self.joint_sample = None            # (received s, position, velocity)
+        self.first_joint_s = None
+        self.last_command_s = -math.inf
+        self.samples = {'joints': [], 'commands': [], 'reference': []}   # for stage 1's fit
+        self.writer = None
+        self.session = None
+        self.label = None
+        self.workers = ThreadPoolExecutor(max_workers=1)
+        self.work = None
+        self.voltage_pub = None
+        if self.settings.fit_only_bag:
+            self.create_timer(0.05, self.fit_only)
+            self.get_logger().info(f'fitting {self.settings.fit_only_bag}; nothing is driven')
+            return
+        self.voltage_pub = self.create_publisher(Float64MultiArray, 'voltage_command',
+                                                 COMMANDS)
+        self.reference_pub = self.create_publisher(JointState, '~/reference', STATE_STREAM)
+        self.create_subscription(JointState, 'joint_states', self.on_joint_states,
+                                 STATE_STREAM)
+        self.create_subscription(BatteryState, 'battery_state', self.on_battery, STATE_STREAM)
+        self.create_timer(self.period_s, self.watch)
+        self.writer = LogWriter(self.directory / LOG_NAME)   # ready before the arm moves
+        self.get_logger().info(
+            'waiting for joint_states; the controller must not be running (this node '
+            'drives the arm)')
+
+    def now_s(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    # ------------------------------------------------------------------ inputs
+
+    def on_joint_states(self, msg: JointState) -> None:
+        position = joint_positions(msg)
+        velocity = list(msg.velocity)
+        if len(msg.name) == len(velocity) and all(n in msg.name for n in JOINT_NAMES):
+            velocity = [velocity[list(msg.name).index(n)] for n in JOINT_NAMES]
+        if len(position) < 2 or not finite(position[:2]):
+            self.get_logger().warning(f'ignored joint_states: position {list(msg.position)} '
+                                      'is not 2 finite angles', throttle_duration_sec=1.0)
+            return
+        now = self.now_s()
+        if len(velocity) < 2 or not finite(velocity[:2]):
+            velocity = self._velocity_from(position, now)
+        self.joint_sample = (now, np.array(position[:2], float), np.array(velocity[:2], float))
+        if self.first_joint_s is None:
+            self.first_joint_s = now
+        if self.writer is not None and self.phase != 'waiting':
+            stamp = _stamp_s(msg) or now
+            self.writer.joint_state(stamp, msg)
+            self.samples['joints'].append((stamp, *self.joint_sample[1:]))
+        # One command per joint state, so that each is computed from the freshest reading.
+        if self.phase in ('driving', 'fitting') and now - self.last_command_s >= \
+                0.5 * self.period_s:
+            self.drive(now)
+
+    def _velocity_from(self, position, now):
+        if self.joint_sample is None or now <= self.joint_sample[0]:
+            return [0.0, 0.0]
+        return list((np.array(position[:2]) - self.joint_sample[1]) / (now - self.joint_sample[0]))
+
+    def on_battery(self, msg: BatteryState) -> None:
+        if self.writer is not None and self.phase != 'waiting' and math.isfinite(msg.voltage):
+            self.writer.battery(_stamp_s(msg) or self.now_s(), msg)
+
+    # ------------------------------------------------------------------ the run
+
+    def watch(self) -> None:
+        """Start once the joint states flow; stop if they stop; pick up finished fits."""
+        now = self.now_s()
+        if self.phase == 'waiting':
+            self.wait_then_start(now)
+            return
+        if self.phase not in ('driving', 'fitting'):
+            return
+        if now - self.joint_sample[0] > self.settings.joint_state_timeout_s:
+            self.finish(f'no joint_states for {now - self.joint_sample[0]:.2f} s: stopped at '
+                        '0 V')
+            return
+        if self.work is not None and self.work.done():
+            self.take_work()
+
+    def wait_then_start(self, now) -> None:
+        if self.first_joint_s is None or now - self.first_joint_s < DISCOVERY_S:
+            return
+        others = self.count_publishers('voltage_command') - 1
+        if others > 0:
+            self.finish(f'{others} other node(s) publish voltage_command (the controller?): '
+                        'stop them first; nothing was driven')
+            return
+        try:
+            self.session = Session(self.arm, self.settings, self.joint_sample[1])
+        except ValueError as error:
+            self.finish(f'no safe excitation: {error}')
+            return
+        for note in self.session.notes:
+            self.get_logger().warning(f'excitation {note}')
+        excitation = self.session.run.excitation
+        self.get_logger().info(
+            f'stage 1: {excitation.duration_s:.1f} s: '
+            + ', '.join(part.name for part in excitation.parts))
+        self.phase = 'driving'
+        self.drive(self.now_s())
+
+    def drive(self, now) -> None:
+        _, position, velocity = self.joint_sample
+        session = self.session
+        if session.stopped is None and self.count_publishers('voltage_command') > 1:
+            session.run.stop(now, position, 'another node began publishing voltage_command')
+        voltage = session.command(now, position, velocity)
+        self.publish(voltage, now)
+        self.say_where(now)
+        if self.phase != 'driving':
+            return
+        if session.stage_one_done(now) and self.work is None:
+            self.get_logger().info('stage 1 done: fitting it while holding the arm')
+            self.work = self.workers.submit(provisional_model, self.samples_so_far(),
+                                            self.arm, self.settings)
+        elif session.finished(now):
+            self.writer.close()
+            self.writer = None
+            if session.stopped is not None:
+                self.finish(f'excitation stopped: {session.stopped}; the log is in '
+                            f'{self.directory / LOG_NAME}, nothing was fitted')
+                return
+            self.get_logger().info(
+                f'excitation done in {session.elapsed_s(now):.1f} s of arm time '
+                f'({session.run.current_clamped} commands held to max_current_a in stage 2); '
+                'fitting while holding the arm')
+            self.phase = 'fitting'
+            self.work = self.workers.submit(self.identify, self.directory / LOG_NAME)
+
+    def say_where(self, now) -> None:
+        label = self.session.label_at(now)
+        if label == self.label:
+            return
+        self.label = label
+        if self.session.stopped is not None:
+            self.get_logger().error(f'excitation stopped: {self.session.stopped}; gliding '
+                                    'back to the centre')
+        else:
+            self.get_logger().info(f'excitation: {label}')
+
+    def publish(self, voltage, now) -> None:
+        self.last_command_s = now
+        self.voltage_pub.publish(Float64MultiArray(data=[float(v) for v in voltage]))
+        q_ref, qd_ref = self.session.reference
+        reference = JointState(header=Header(stamp=self.get_clock().now().to_msg()),
+                               name=list(JOINT_NAMES), position=[float(v) for v in q_ref],
+                               velocity=[float(v) for v in qd_ref])
+        self.reference_pub.publish(reference)
+        if self.writer is not None:
+            self.writer.voltage(now, voltage)
+            self.writer.reference(now, q_ref, qd_ref)
+            self.samples['commands'].append((now, np.array(voltage, float)))
+            self.samples['reference'].append((now, np.array(q_ref, float)))
+
+    def samples_so_far(self) -> Log:
+        joints, commands = self.samples['joints'], self.samples['commands']
+        reference = self.samples['reference']
+        return Log(joint_time_s=np.array([s[0] for s in joints]),
+                   position_rad=np.array([s[1] for s in joints]),
+                   velocity_rad_s=np.array([s[2] for s in joints]),
+                   command_time_s=np.array([s[0] for s in commands]),
+                   voltage_v=np.array([s[1] for s in commands]),
+                   reference_time_s=np.array([s[0] for s in reference]),
+                   reference_rad=np.array([s[1] for s in reference]))
+
+    def take_work(self) -> None:
+        work, self.work = self.work, None
+        if self.phase == 'driving':
+            try:
+                model, note = work.result()
+            except Exception as error:           # any failure: stage 2 with the file's model
+                model, note = self.arm, f'stage 2 with the robot file: stage 1 gave {error}'
+            known = len(self.session.notes)
+            self.session.begin_stage_two(model, note)
+            for line in self.session.notes[known:]:
+                self.get_logger().info(f'excitation {line}')
+            excitation = self.session.run.excitation
+            self.get_logger().info(f'stage 2: {excitation.duration_s:.1f} s: '
+                                   + ', '.join(part.name for part in excitation.parts))
+            return
+        try:
+            result = work.result()
+        except (ValueError, OSError) as error:
+            self.finish(f'could not fit: {error}')
+            return
+        self.report(result)
+
+    def identify(self, bag):
+        notes = self.session.notes if self.session is not None else []
+        return identify(read_log(bag), self.arm, self.settings, self.directory, str(bag), notes)
+
+    def report(self, result) -> None:
+        fit = result.fit
+        self.get_logger().info(
+            f'fitted {fit.samples} samples; residual RMS shoulder {fit.residual_rms_v[0]:.3f} V'
+            f', elbow {fit.residual_rms_v[1]:.3f} V; command lag {1000 * fit.lag_s:+.1f} ms; '
+            f'report {result.report_file}, plot {result.plot_file}')
+        if not fit.instrumented:
+            self.get_logger().warning(
+                'the log holds no plan (/sysid/reference): fitted by least squares, whose '
+                'inertias the sensor noise pulls low in closed loop')
+        if result.parameter_file is None:
+            self.finish(f'no parameter file: {result.error}')
+            return
+        self.exit_code = 0
+        self.finish(f'wrote {result.parameter_file}: layer it over the robot file with '
+                    f'--params-file {result.parameter_file}', error=False)
+
+    def fit_only(self) -> None:
+        if self.phase == 'waiting':
+            self.phase = 'fitting'
+            self.work = self.workers.submit(self.identify, Path(self.settings.fit_only_bag))
+        elif self.phase == 'fitting' and self.work.done():
+            self.take_work()
+
+    def finish(self, message: str, error: bool = True) -> None:
+        """Say how it ended, send 0 V, and end spin()."""
+        if self.phase == 'done':
+            return
+        self.phase = 'done'
+        (self.get_logger().error if error else self.get_logger().info)(message)
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = None
+        self.send_zero_volts()
+        self.context.try_shutdown()          # ends spin(); main() cleans up
+
+    def send_zero_volts(self) -> None:
+        if self.voltage_pub is None:
+            return
+        try:
+            for _ in range(3):
+                self.voltage_pub.publish(Float64MultiArray(data=[0.0, 0.0]))
+            self.voltage_pub.wait_for_all_acked(Duration(seconds=SHUTDOWN_ACK_S))
+        except Exception as error:              # the context may already be gone
+            self.get_logger().warning(f'could not send 0 V: {error}')
+
+    def on_shutdown(self) -> None:
+        """0 V on the way out (Ctrl-C mid-run): the arm must not keep the last command."""
+        self.workers.shutdown(wait=False, cancel_futures=True)
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = None
+        if self.phase != 'done':
+            self.send_zero_volts()
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+class _Started:
+    node = None
+
+
+def sysid_node() -> SysIdNode:
+    """The node, with SIGINT and SIGTERM handed back to Python so that 0 V goes out first."""
+    uninstall_signal_handlers()
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _interrupt)
+    _Started.node = SysIdNode()
+    return _Started.node
+
+
+def main(args=None):
+    code = run(sysid_node, args)
+    sys.exit(code or (_Started.node.exit_code if _Started.node is not None else 1))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,419 @@
+"""The motion that identifies the arm, checked safe before it is driven, and how it is tracked.
+
+As WPILib's SysId does per mechanism, each joint in turn makes quasistatic sweeps (its speed
+ramped slowly up and down, so gravity and friction dominate: p1, p2, b, c) and dynamic steps
+(fast rest-to-rest moves: the inertias α, γ); both joints also move together in a multi-sine
+(the coupling and Coriolis terms, and every parameter at once). All of it moves about a
+centre configuration and returns there between parts. (``session`` runs the sweeps and the
+multi-sine first, and designs the steps with what they taught.)
+
+Before anything is driven, ``design_excitation`` samples every part every 5 ms and checks it
+with the model it is given: clear of forbidden space by ``margin_rad`` on both joints, and
+with the feedforward needing at most a share of ``max_current_a`` per motor (the rest is
+room for feedback and for the model being wrong). A part that fails is made smaller (and a
+step slower) until it passes, or dropped; each change is reported.
+
+``ExcitationRun`` tracks it: the model's inverse dynamics as feedforward plus PD on the
+joint_states, every command clamped so that no motor draws more than ``max_current_a``
+(|V − G·ω/Kv|/R per motor) -- under the motor controllers' own limit, so every command is
+applied as sent and the log holds the voltage the arm really got. It stops (and glides back
+to the centre) if the arm strays from the plan or nears forbidden space.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from arm_control.config import ArmConfig
+from arm_control.model.dynamics import ArmDynamics
+from arm_control.model.world import ForbiddenSpace
+from arm_control.sysid.settings import SysIdConfig
+
+CHECK_STEP_S = 0.005
+FEEDBACK_HEADROOM_V = 2.0       # the planned feedforward leaves this much of max_voltage
+SHRINK = 0.85                   # a part that fails is scaled by this and checked again ...
+SHRINK_TRIES = 12               # ... at most this many times, then dropped
+PAUSE_S = 0.3                   # rest at the centre between parts
+MULTISINE_TONES = 5             # per joint
+MULTISINE_RAMP_S = 1.5          # the multi-sine fades in and out over this
+APPROACH_SPEED_RAD_S = 0.4      # moving to the centre first, and gliding back after a stop
+
+
+def _smoothstep(u):
+    """s(u) = 10u³ − 15u⁴ + 6u⁵ and its first two derivatives: rest to rest, C²."""
+    u = np.clip(u, 0.0, 1.0)
+    return (u ** 3 * (10.0 - 15.0 * u + 6.0 * u ** 2),
+            30.0 * u ** 2 * (1.0 - u) ** 2,
+            60.0 * u * (1.0 - u) * (1.0 - 2.0 * u))
+
+
+class Segment:
+    """A reference motion over [0, duration_s]: ``sample(t)`` gives q, q̇, q̈, each (N, 2)."""
+
+    duration_s: float
+    start_rad: np.ndarray
+    end_rad: np.ndarray
+
+    def sample(self, t):
+        raise NotImplementedError
+
+
+class Hold(Segment):
+    def __init__(self, q, duration_s):
+        self.start_rad = self.end_rad = np.asarray(q, float)
+        self.duration_s = float(duration_s)
+
+    def sample(self, t):
+        t = np.atleast_1d(t)
+        zero = np.zeros((len(t), 2))
+        return self.start_rad + zero, zero, zero.copy()
+
+
+class Quintic(Segment):
+    """q = q0 + (q1 − q0)·s(t/T), s the smoothstep: rest to rest."""
+
+    def __init__(self, q_from, q_to, duration_s):
+        self.start_rad, self.end_rad = np.asarray(q_from, float), np.asarray(q_to, float)
+        self.duration_s = float(duration_s)
+
+    def sample(self, t):
+        u = np.atleast_1d(t)[:, None] / self.duration_s
+        s, ds, dds = _smoothstep(u)
+        change = self.end_rad - self.start_rad
+        return (self.start_rad + change * s, change * ds / self.duration_s,
+                change * dds / self.duration_s ** 2)
+
+
+class Sweep(Segment):
+    """One joint from q0 over ``distance_rad``, its speed ramped up at ``acceleration`` to
+    half-way and down again (a triangle in velocity), the other joint held: quasistatic."""
+
+    def __init__(self, q_from, joint, distance_rad, acceleration_rad_s2):
+        self.start_rad = np.asarray(q_from, float)
+        self.joint, self.distance_rad = joint, float(distance_rad)
+        self.acceleration = math.copysign(acceleration_rad_s2, distance_rad)
+        self.duration_s = 2.0 * math.sqrt(abs(distance_rad) / acceleration_rad_s2)
+        self.end_rad = self.start_rad.copy()
+        self.end_rad[joint] += distance_rad
+
+    def sample(self, t):
+        t = np.clip(np.atleast_1d(t), 0.0, self.duration_s)
+        half, a = self.duration_s / 2.0, self.acceleration
+        rising = t < half
+        left = self.duration_s - t
+        x = np.where(rising, 0.5 * a * t ** 2, self.distance_rad - 0.5 * a * left ** 2)
+        v = np.where(rising, a * t, a * left)
+        acc = np.where(rising, a, -a)
+        q, qd, qdd = (np.zeros((len(t), 2)) for _ in range(3))
+        q[:] = self.start_rad
+        q[:, self.joint] += x
+        qd[:, self.joint], qdd[:, self.joint] = v, acc
+        return q, qd, qdd
+
+
+class MultiSine(Segment):
+    """q_j = c_j + w(t)·Σ_k a_jk·sin(2π f_jk t + φ_jk), faded in and out by w (C²)."""
+
+    def __init__(self, centre, amplitudes, frequencies_hz, phases, duration_s, ramp_s):
+        self.start_rad = self.end_rad = np.asarray(centre, float)
+        self.amplitudes = np.asarray(amplitudes, float)          # (2, K)
+        self.omega = 2.0 * math.pi * np.asarray(frequencies_hz, float)
+        self.phases = np.asarray(phases, float)
+        self.duration_s, self.ramp_s = float(duration_s), min(float(ramp_s), duration_s / 2)
+
+    def _window(self, t):
+        rise = _smoothstep(t / self.ramp_s)
+        fall = _smoothstep((self.duration_s - t) / self.ramp_s)
+        w = rise[0] * fall[0]
+        dw = (rise[1] * fall[0] - rise[0] * fall[1]) / self.ramp_s
+        ddw = (rise[2] * fall[0] - 2.0 * rise[1] * fall[1] + rise[0] * fall[2]) \
+            / self.ramp_s ** 2
+        return w, dw, ddw
+
+    def sample(self, t):
+        t = np.atleast_1d(t)
+        angle = self.omega[None] * t[:, None, None] + self.phases[None]   # (N, 2, K)
+        a, w_k = self.amplitudes[None], self.omega[None]
+        s = np.sum(a * np.sin(angle), axis=-1)
+        ds = np.sum(a * w_k * np.cos(angle), axis=-1)
+        dds = -np.sum(a * w_k ** 2 * np.sin(angle), axis=-1)
+        w, dw, ddw = (v[:, None] for v in self._window(t))
+        return (self.start_rad + w * s, dw * s + w * ds, ddw * s + 2.0 * dw * ds + w * dds)
+
+
+@dataclass(frozen=True)
+class Part:
+    name: str
+    segments: tuple
+
+
+class Excitation:
+    """Parts one after another: ``sample(t)`` over the whole, and which part is where."""
+
+    def __init__(self, parts):
+        self.parts = tuple(parts)
+        self.segments = [s for part in self.parts for s in part.segments]
+        self.labels = [part.name for part in self.parts for _ in part.segments]
+        self.starts_s = np.concatenate([[0.0], np.cumsum([s.duration_s
+                                                          for s in self.segments])])
+        self.duration_s = float(self.starts_s[-1])
+
+    def sample(self, t):
+        """q, q̇, q̈ (each (N, 2)) at times t; before 0 the start, after the end the end."""
+        t = np.atleast_1d(np.asarray(t, float))
+        index = np.clip(np.searchsorted(self.starts_s, t, side='right') - 1,
+                        0, len(self.segments) - 1)
+        q, qd, qdd = (np.zeros((len(t), 2)) for _ in range(3))
+        for k in np.unique(index):
+            where = index == k
+            local = np.clip(t[where] - self.starts_s[k], 0.0, self.segments[k].duration_s)
+            q[where], qd[where], qdd[where] = self.segments[k].sample(local)
+        return q, qd, qdd
+
+    def label_at(self, t) -> list:
+        index = np.clip(np.searchsorted(self.starts_s, np.atleast_1d(t), side='right') - 1,
+                        0, len(self.segments) - 1)
+        return [self.labels[k] for k in index]
+
+
+def per_motor_current_a(dynamics: ArmDynamics, arm: ArmConfig, joint: int, voltage,
+                        speed_rad_s):
+    """(V − G·ω/Kv)/R for one motor of ``joint``."""
+    return dynamics.motors[joint].current_a(voltage, speed_rad_s)
+
+
+def voltage_range_for_current(dynamics, arm, joint, speed_rad_s, max_current_a):
+    """The voltages at which one motor of ``joint`` draws at most ``max_current_a``."""
+    at_zero = per_motor_current_a(dynamics, arm, joint, 0.0, speed_rad_s)
+    per_volt = per_motor_current_a(dynamics, arm, joint, 1.0, speed_rad_s) - at_zero
+    return ((-max_current_a - at_zero) / per_volt, (max_current_a - at_zero) / per_volt)
+
+
+def feedforward(dynamics: ArmDynamics, q, qd, qdd) -> np.ndarray:
+    """The voltages the model says a motion needs, (N, 2)."""
+    return np.array([dynamics.voltage_for(a, b, c) for a, b, c in zip(q, qd, qdd)])
+
+
+def check_segments(segments, arm: ArmConfig, settings: SysIdConfig,
+                   forbidden: ForbiddenSpace, dynamics: ArmDynamics,
+                   current_share: float) -> str | None:
+    """Why the motion is unsafe to drive (a sentence), or None when it is safe."""
+    for segment in segments:
+        t = np.arange(0.0, segment.duration_s + CHECK_STEP_S, CHECK_STEP_S)
+        q, qd, qdd = segment.sample(np.minimum(t, segment.duration_s))
+        free = np.asarray(forbidden.is_free(q))
+        if not np.all(free):
+            first = q[np.argmin(free)]
+            return (f'it comes within {math.degrees(settings.margin_rad):.1f} deg of forbidden '
+                    f'space at [{math.degrees(first[0]):.1f}, {math.degrees(first[1]):.1f}] deg')
+        voltage = feedforward(dynamics, q, qd, qdd)
+        limit_v = arm.battery.nominal_voltage - FEEDBACK_HEADROOM_V
+        if np.max(np.abs(voltage)) > limit_v:
+            return (f'its feedforward needs {np.max(np.abs(voltage)):.1f} V, more than '
+                    f'{limit_v:.1f} V')
+        allowed_a = current_share * settings.max_current_a
+        for joint in range(2):
+            current = np.abs(per_motor_current_a(dynamics, arm, joint, voltage[:, joint],
+                                                 qd[:, joint]))
+            if np.max(current) > allowed_a:
+                return (f'the {arm.joints[joint].name} needs {np.max(current):.0f} A per '
+                        f'motor, more than {allowed_a:.0f} A')
+    return None
+
+
+def _sweeps(centre, joint, reach, settings):
+    a = settings.quasistatic_acceleration_rad_s2
+    out = Sweep(centre, joint, reach, a)
+    across = Sweep(out.end_rad, joint, -2.0 * reach, a)
+    back = Sweep(across.end_rad, joint, reach, a)
+    return (out, across, back, Hold(centre, PAUSE_S))
+
+
+def _steps(centre, joint, reach, duration_s):
+    target = np.array(centre, float)
+    target[joint] += reach
+    other = np.array(centre, float)
+    other[joint] -= reach
+    return (Quintic(centre, target, duration_s), Hold(target, PAUSE_S),
+            Quintic(target, other, duration_s * math.sqrt(2.0)), Hold(other, PAUSE_S),
+            Quintic(other, centre, duration_s), Hold(centre, PAUSE_S))
+
+
+def _multisine(centre, settings, scale):
+    """Log-spaced tones over the band, alternating between the joints so none is shared;
+    amplitudes ∝ 1/f (each tone the same speed) summing to the joint's largest excursion."""
+    rng = np.random.default_rng(settings.random_seed)
+    low, high = settings.multisine_band_hz
+    tones = np.geomspace(low, high, 2 * MULTISINE_TONES)
+    # Whole cycles over the motion, so the tones stay apart in frequency.
+    duration = settings.multisine_time_s
+    tones = np.maximum(np.round(tones * duration), 1.0) / duration
+    frequencies = np.stack([tones[0::2], tones[1::2]])
+    weights = 1.0 / frequencies
+    amplitudes = (weights / weights.sum(axis=1, keepdims=True)
+                  * np.asarray(settings.multisine_amplitude_rad)[:, None] * scale)
+    phases = rng.uniform(0.0, 2.0 * math.pi, frequencies.shape)
+    return (MultiSine(centre, amplitudes, frequencies, phases, duration, MULTISINE_RAMP_S),
+            Hold(centre, PAUSE_S))
+
+
+QUASISTATIC, MULTISINE, DYNAMIC = 'quasistatic', 'multi-sine', 'dynamic'
+
+
+def design_excitation(arm: ArmConfig, settings: SysIdConfig, start_rad=None,
+                      kinds=(QUASISTATIC, MULTISINE, DYNAMIC), current_share=None):
+    """The excitation about ``settings.centre_rad``, every part checked and shrunk until safe.
+
+    ``kinds`` picks the parts, in this order: each joint's quasistatic sweeps, the coupled
+    multi-sine, each joint's dynamic steps. Returns ``(Excitation, notes)``; with
+    ``start_rad`` (where the arm is) it begins with a gentle move from there to the centre,
+    checked free of forbidden space (no margin: the arm may rest near it). Raises
+    ValueError if the centre or that move is unsafe, or if no part can be made safe.
+    The feedforward may need ``current_share`` of ``max_current_a`` (default: stage 1's).
+    """
+    if current_share is None:
+        current_share = settings.stage_one_current_share
+    dynamics = ArmDynamics(arm)
+    forbidden = ForbiddenSpace(arm, settings.margin_rad)
+    centre = np.array(settings.centre_rad, float)
+    if not forbidden.is_free(centre):
+        raise ValueError(f'the excitation centre {list(settings.centre_rad)} rad is not clear '
+                         f'of forbidden space by margin_rad: '
+                         f'{forbidden.why_forbidden(centre) or "too close"}')
+    notes, parts = [], []
+    if start_rad is not None:
+        start = np.asarray(start_rad, float)
+        distance = float(np.max(np.abs(centre - start)))
+        if distance > 1e-3:
+            if not ForbiddenSpace(arm).segment_is_free(start, centre, 0.001745):
+                raise ValueError(
+                    f'the straight move from the arm at {np.round(start, 3).tolist()} rad to '
+                    f'the centre {list(settings.centre_rad)} rad crosses forbidden space: '
+                    'move the arm nearer the centre first')
+            duration = max(1.0, 1.875 * distance / APPROACH_SPEED_RAD_S)
+            parts.append(Part('to the centre', (Quintic(start, centre, duration),
+                                                Hold(centre, PAUSE_S))))
+
+    builders = []
+    for joint, name in enumerate(('shoulder', 'elbow')):
+        reach = settings.quasistatic_range_rad[joint]
+        if QUASISTATIC in kinds and reach > 0.0:
+            builders.append((f'{name} {QUASISTATIC}',
+                             lambda s, j=joint, r=reach: _sweeps(centre, j, r * s, settings)))
+    if (MULTISINE in kinds and settings.multisine_time_s > 0.0
+            and max(settings.multisine_amplitude_rad) > 0.0):
+        builders.append((f'coupled {MULTISINE}', lambda s: _multisine(centre, settings, s)))
+    for joint, name in enumerate(('shoulder', 'elbow')):
+        reach = settings.dynamic_step_rad[joint]
+        if DYNAMIC in kinds and reach > 0.0:
+            builders.append((f'{name} {DYNAMIC}', lambda s, j=joint, r=reach: _steps(
+                centre, j, r * math.sqrt(s), settings.dynamic_step_time_s / math.sqrt(s))))
+
+    for name, build in builders:
+        scale = 1.0
+        for _ in range(SHRINK_TRIES + 1):
+            segments = build(scale)
+            problem = check_segments(segments, arm, settings, forbidden, dynamics,
+                                     current_share)
+            if problem is None:
+                break
+            scale *= SHRINK
+        if problem is not None:
+            notes.append(f'{name}: dropped, {problem} even at {scale / SHRINK:.0%} of its size')
+            continue
+        if scale < 1.0:
+            notes.append(f'{name}: at {scale:.0%} of its size, to keep it safe')
+        parts.append(Part(name, segments))
+    if builders and not any(part.name != 'to the centre' for part in parts):
+        raise ValueError('no part of the excitation can be made safe: ' + '; '.join(notes))
+    return Excitation(parts), notes
+
+
+class ExcitationRun:
+    """Drives an ``Excitation``: ``command(now_s, position, velocity)`` gives the voltages.
+
+    V = V_ff(q_ref, q̇_ref, q̈_ref) + kp·(q_ref − q) + kd·(q̇_ref − q̇), with V_ff from the robot
+    file's inverse dynamics, then clamped to ±max_voltage and to the voltages at which each
+    motor draws at most ``max_current_a``. Time starts at the first command. ``finished``
+    once the excitation (or, after a stop, the glide back) is over; ``stopped`` says why it
+    stopped early, if it did.
+    """
+
+    def __init__(self, arm: ArmConfig, settings: SysIdConfig, excitation: Excitation):
+        self.arm, self.settings, self.excitation = arm, settings, excitation
+        self.dynamics = ArmDynamics(arm)
+        self.watch = ForbiddenSpace(arm, settings.margin_rad / 2.0)
+        self.free_space = ForbiddenSpace(arm)
+        self.gains = np.array(settings.pd_gains)
+        self.motion = excitation
+        self.began_s = None
+        self.motion_began_s = 0.0
+        self.stopped = None                   # the reason, once stopped early
+        self.current_clamped = 0              # commands the current limit changed
+        self.reference = None                 # (q, q̇) the last command was computed for
+
+    def elapsed_s(self, now_s) -> float:
+        return 0.0 if self.began_s is None else now_s - self.began_s
+
+    def finished(self, now_s) -> bool:
+        return (self.began_s is not None
+                and now_s - self.motion_began_s >= self.motion.duration_s)
+
+    def label_at(self, now_s) -> str:
+        if self.stopped is not None:
+            return 'stopped'
+        return self.excitation.label_at(self.elapsed_s(now_s))[0]
+
+    def command(self, now_s, position, velocity) -> np.ndarray:
+        if self.began_s is None:
+            self.began_s = self.motion_began_s = now_s
+        position, velocity = np.asarray(position, float), np.asarray(velocity, float)
+        q_ref, qd_ref, qdd_ref = (v[0] for v in self.motion.sample(now_s - self.motion_began_s))
+        if self.stopped is None:
+            problem = self._problem(position, q_ref)
+            if problem is not None:
+                self.stop(now_s, position, problem)
+                q_ref, qd_ref, qdd_ref = (v[0] for v in self.motion.sample(0.0))
+        self.reference = (q_ref, qd_ref)
+        voltage = (np.array(self.dynamics.voltage_for(q_ref, qd_ref, qdd_ref))
+                   + self.gains[:, 0] * (q_ref - position)
+                   + self.gains[:, 1] * (qd_ref - velocity))
+        volts = self.arm.battery.nominal_voltage
+        voltage = np.clip(voltage, -volts, volts)
+        clamped = voltage.copy()
+        for joint in range(2):
+            low, high = voltage_range_for_current(self.dynamics, self.arm, joint,
+                                                  velocity[joint], self.settings.max_current_a)
+            clamped[joint] = min(max(voltage[joint], low), high)
+        if np.any(clamped != voltage):
+            self.current_clamped += 1
+        return clamped
+
+    def _problem(self, position, q_ref):
+        error = np.abs(q_ref - position)
+        if np.max(error) > self.settings.abort_tracking_error_rad:
+            joint = int(np.argmax(error))
+            return (f'the {self.arm.joints[joint].name} strayed {math.degrees(error[joint]):.1f}'
+                    f' deg from the excitation (abort_tracking_error_rad '
+                    f'{math.degrees(self.settings.abort_tracking_error_rad):.1f} deg)')
+        if not self.watch.is_free(position):
+            return (f'the arm at [{math.degrees(position[0]):.1f}, '
+                    f'{math.degrees(position[1]):.1f}] deg came within '
+                    f'{math.degrees(self.watch.margin_rad):.1f} deg of forbidden space')
+        return None
+
+    def stop(self, now_s, position, reason: str) -> None:
+        """Stop the excitation: glide back to the centre if the straight way is free, else
+        hold where the arm is, for at least a second."""
+        self.stopped = reason
+        centre = np.array(self.settings.centre_rad, float)
+        position = np.asarray(position, float)
+        distance = float(np.max(np.abs(centre - position)))
+        if self.free_space.segment_is_free(position, centre, 0.001745):
+            glide = Quintic(position, centre,
+                            max(1.0, 1.875 * distance / APPROACH_SPEED_RAD_S))
+            self.motion = Excitation([Part('stopped', (glide, Hold(centre, PAUSE_S)))])
+        else:
+            self.motion = Excitation([Part('stopped', (Hold(position, 1.0),))])
+        self.motion_began_s = now_s

@@ -1,0 +1,88 @@
+"""The installed ``sysid`` executable against the sim with the demo arm, over DDS: it drives a
+shortened excitation, writes a parameter file that layers over arm.yaml, and fits the same
+log again without driving; it will not drive while another node commands the arm."""
+
+import time
+
+import pytest
+from ros_harness import install_prefix
+from std_msgs.msg import Float64MultiArray
+import yaml
+
+from arm_control import config, parameters
+
+SHORT = ('-p', 'quasistatic_range_rad:=[0.3, 0.4]',
+         '-p', 'quasistatic_acceleration_rad_s2:=1.0',
+         '-p', 'multisine_time_s:=5.0', '-p', 'multisine_amplitude_rad:=[0.3, 0.5]',
+         '-p', 'dynamic_step_rad:=[0.25, 0.35]')
+
+
+def share(name):
+    return str(install_prefix() / 'share' / 'arm_control' / 'config' / name)
+
+
+def wait_for_exit(process, timeout_s):
+    deadline = time.monotonic() + timeout_s
+    while process.alive() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not process.alive(), f'still running after {timeout_s} s:\n{process.output()}'
+    return process.process.returncode
+
+
+def test_sysid_identifies_the_demo_arm_and_fits_its_own_log_again(launch, probe, tmp_path):
+    launch('sim', '--params-file', share('arm.yaml'), '--params-file',
+           share('sysid_demo_arm.yaml'))
+    commands = probe.collect(Float64MultiArray, '/voltage_command')
+    sysid = launch('sysid', *SHORT, '-p', f'output_directory:={tmp_path / "run"}')
+    began = time.monotonic()
+    while sysid.alive() and time.monotonic() - began < 120.0:
+        probe.spin_for(0.2)
+    assert wait_for_exit(sysid, 1.0) == 0, sysid.output()
+    output = sysid.output()
+    assert 'stage 2 designed and tracked with the stage-1 fit' in output
+    files = {p.name for p in (tmp_path / 'run').iterdir()}
+    assert {'log.mcap', 'identified_params.yaml', 'report.md', 'fit.png'} <= files
+    # A file that parses, names only the identified parameters, and layers over arm.yaml.
+    written = tmp_path / 'run' / 'identified_params.yaml'
+    assert list(yaml.safe_load(written.read_text())) == ['/**']
+    overlay = parameters.read_parameter_file(written, 'controller')
+    assert len(overlay) == 10 and all(name.split('.')[0] in ('shoulder', 'elbow')
+                                      for name in overlay)
+    layered = parameters.read_parameter_file(share('arm.yaml'), 'controller')
+    layered.update(overlay)
+    identified = config.ArmConfig.from_parameters(layered)
+    # The demo forearm's moment mb·rb is 22 kg x 0.55 m (arm.yaml says 15 x 0.4).
+    assert identified.elbow.mass_kg * identified.elbow.com_from_joint_m == \
+        pytest.approx(12.1, rel=0.05)
+    # One command per joint state, 50 Hz, and 0 V last.
+    assert 30.0 * 19.0 < len(commands) < 60.0 * 40.0
+    assert list(commands[-1].data) == [0.0, 0.0]
+
+    # The same log, fitted without driving: the same file, and not one command sent.
+    heard = len(commands)
+    again = launch('sysid', '-p', f'fit_only_bag:={tmp_path / "run" / "log.mcap"}',
+                   '-p', f'output_directory:={tmp_path / "again"}')
+    assert wait_for_exit(again, 60.0) == 0, again.output()
+    probe.spin_for(0.5)
+    assert len(commands) == heard
+    again_written = (tmp_path / 'again' / 'identified_params.yaml').read_text()
+    assert again_written.split('\n', 1)[1] == written.read_text().split('\n', 1)[1]
+
+
+def test_sysid_will_not_drive_while_another_node_commands_the_arm(launch, probe, tmp_path):
+    publisher = probe.node.create_publisher(Float64MultiArray, '/voltage_command', 10)
+    launch('sim')
+    sysid = launch('sysid', '-p', f'output_directory:={tmp_path}')
+    began = time.monotonic()
+    while sysid.alive() and time.monotonic() - began < 30.0:
+        publisher.publish(Float64MultiArray(data=[0.0, 0.0]))
+        probe.spin_for(0.1)
+    assert wait_for_exit(sysid, 1.0) == 1
+    assert 'other node(s) publish voltage_command' in sysid.output()
+    assert not (tmp_path / 'identified_params.yaml').exists()
+
+
+def test_a_bad_parameter_stops_it_with_the_parameter_named(launch):
+    sysid = launch('sysid', '-p', 'multisine_band_hz:=[1.0, 0.5]')
+    assert wait_for_exit(sysid, 30.0) == 2
+    assert 'multisine_band_hz' in sysid.output()
