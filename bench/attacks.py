@@ -268,6 +268,13 @@ class Bench:
             self.call(self.reset)
         self.call(self.cancel)
         self.rig.reset_sim()
+        if not self.rig.wait_held(START_Q, timeout_s=1.5):
+            # The controller took the sim's reset back to where it last held the arm: a
+            # goal at the start puts every attack on the same footing.
+            since = time.time()
+            self.send(*point_of(START_Q))
+            if not self.wait_until(lambda: self.heard.said(since, 'reached'), 10.0):
+                raise TimeoutError('the arm did not go back to its start')
 
     def restart_all(self) -> None:
         self.rig.close()
@@ -491,10 +498,26 @@ def run_attack(b: Bench, name: str) -> dict:
     p50, p99, worst, count = period_ms(b.heard.voltage_s, start_s, end_s)
     commanding, overall = lowest_points_mm(b.heard, start_s, end_s)
     dead = [n for n, p in b.rig.processes.items() if not p.alive()]
-    notes = [row.get('notes', '')] + ([f'died: {", ".join(dead)}'] if dead else [])
+    notes = [row.get('notes', ''), *incidents(b.heard, start_s, end_s)] + \
+        ([f'died: {", ".join(dead)}'] if dead else [])
     return dict(row, attack=name, commanding=commanding, overall=overall,
                 period=f'{p50:.1f} / {p99:.1f} / {worst:.0f}', heard=count,
                 notes='; '.join(n for n in notes if n), seconds=end_s - start_s)
+
+
+def incidents(heard: Listener, start_s: float, end_s: float) -> list:
+    """What the controller said of e-stops and of lost joint states (it sends 0 V then)."""
+    said = [text for t, _, _, text in heard.events if start_s <= t <= end_s]
+    estops = [text.split(';')[0].removeprefix('E-STOP: ') for text in said
+              if text.startswith('E-STOP')]
+    lost = sum('no joint states' in text and not text.startswith('E-STOP') for text in said)
+    out = []
+    if estops:
+        more = ', ...' if len(set(estops)) > 1 else ''
+        out.append(f'{len(estops)} e-stops ({short(estops[0], 30)}{more})')
+    if lost:
+        out.append(f'joint states lost {lost} times (0 V)')
+    return out
 
 
 def print_table(rows, heading: str) -> None:
