@@ -164,10 +164,11 @@ def period_ms(arrivals, start_s: float, end_s: float):
 
 
 def lowest_points_mm(heard: Listener, start_s: float, end_s: float):
-    """(lowest while the controller commanded, lowest overall), mm; None without samples."""
+    """(lowest while the controller commanded, lowest overall), mm, None without samples;
+    and where the first was: (its time after start_s, the controller's state then)."""
     truth = heard.truth_between(start_s, end_s)
     if not len(truth):
-        return None, None
+        return None, None, None
     times, lowest = truth[:, 0], 1000.0 * y_lowest_m(truth[:, 1], truth[:, 2])
     state_times = np.array([t for t, _ in heard.states])
     states = [s for _, s in heard.states]
@@ -179,7 +180,10 @@ def lowest_points_mm(heard: Listener, start_s: float, end_s: float):
                            <= SIM.command_timeout_s) if len(voltage_times) else \
         np.zeros(len(times), bool)
     commanding = fresh & np.array([s not in NOT_COMMANDING and s != '' for s in state])
-    return (lowest[commanding].min() if commanding.any() else None), lowest.min()
+    if not commanding.any():
+        return None, lowest.min(), None
+    index = np.flatnonzero(commanding)[np.argmin(lowest[commanding])]
+    return lowest[index], lowest.min(), (times[index] - start_s, state[index])
 
 
 class Bench:
@@ -488,6 +492,12 @@ def run_attack(b: Bench, name: str) -> dict:
     except Exception as error:
         return dict(attack=name, done='not run', notes=f'the arm could not be prepared: '
                                                        f'{short(str(error), 100)}')
+    # Another system on the domain would mix its arm into the readings.
+    node = b.rig.probe.node
+    counts = {topic: node.count_publishers(topic)
+              for topic in ('/sim/ground_truth', '/voltage_command')}
+    strangers = [f'{count} publishers of {topic} at the start'
+                 for topic, count in counts.items() if count > 1]
     start_s = time.time()
     try:
         row = ATTACKS[name](b)
@@ -496,10 +506,15 @@ def run_attack(b: Bench, name: str) -> dict:
         b.fresh_next = True
     end_s = time.time()
     p50, p99, worst, count = period_ms(b.heard.voltage_s, start_s, end_s)
-    commanding, overall = lowest_points_mm(b.heard, start_s, end_s)
+    commanding, overall, where = lowest_points_mm(b.heard, start_s, end_s)
+    if where:
+        print(f'   lowest while commanding {commanding:.0f} mm, {where[0]:.1f} s in, in state '
+              f'{where[1]}; {len(b.heard.truth_between(start_s, end_s))} true samples',
+              file=sys.stderr, flush=True)
     dead = [n for n, p in b.rig.processes.items() if not p.alive()]
     notes = [row.get('notes', ''), *incidents(b.heard, start_s, end_s)] + \
         ([f'died: {", ".join(dead)}'] if dead else [])
+    notes += strangers
     return dict(row, attack=name, commanding=commanding, overall=overall,
                 period=f'{p50:.1f} / {p99:.1f} / {worst:.0f}', heard=count,
                 notes='; '.join(n for n in notes if n), seconds=end_s - start_s)
