@@ -453,19 +453,26 @@ def controller_restart(b: Bench) -> dict:
         if b.wait_until(lambda: b.heard.first_answer_s(started_s), 0.25):
             break
     accepted_s = b.heard.first_answer_s(started_s)
+
+    def commands_since_start():        # the new process's: the old one is gone by then
+        return [t for t in b.heard.voltage_s if t > started_s]
+    b.wait_until(commands_since_start, READY_TIMEOUT_S - (time.time() - started_s))
     b.wait(b.seconds / 4)
-    inside = sorted(t for t in b.heard.voltage_s if t >= killed_s - 1.0)
-    gaps = np.diff(inside)
-    silence_s = gaps.max() if len(gaps) else math.nan
-    resumed_s = inside[int(np.argmax(gaps)) + 1] if len(gaps) else math.inf
-    truth = b.heard.truth_between(resumed_s, math.inf)
-    found = f'{1000 * y_lowest_m(*truth[0, 1:]):.0f} mm' if len(truth) else 'not heard'
+    before = [t for t in b.heard.voltage_s if t <= started_s]
+    after = commands_since_start()
+    silent_from_s = before[-1] if before else killed_s
+    if after:
+        truth = b.heard.truth_between(after[0], math.inf)
+        found = f'{1000 * y_lowest_m(*truth[0, 1:]):.0f} mm' if len(truth) else 'not heard'
+        commands = (f'voltage_command silent {after[0] - silent_from_s:.2f} s (0 V after '
+                    f'{SIM.command_timeout_s:g} s of it), resumed {after[0] - started_s:.1f} '
+                    f's after the start; lowest point {found} then')
+    else:
+        commands = f'voltage_command still silent {time.time() - silent_from_s:.1f} s on'
     return dict(done=f'controller SIGKILLed while holding, started again at once; a goal at '
                      f'({x:.2f}, {y:.2f}) every 0.25 s until one is taken',
                 ready=f'{accepted_s - started_s:.1f} s' if accepted_s else 'never',
-                notes=f'voltage_command silent {silence_s:.2f} s (0 V after '
-                      f'{SIM.command_timeout_s:g} s of it); lowest point {found} when the '
-                      'new controller first commanded')
+                notes=commands)
 
 
 ATTACKS = {
