@@ -1,0 +1,674 @@
+"""The attacks of issue 12 ("never drop the arm"), run on the installed processes.
+
+sim, planner and controller run as separate processes on a ROS domain of their own (as the
+process tests run them, through test/arm_rig.py); this process attacks them one attack at
+a time, each on a reset arm (or a fresh one, after an attack that leaves the nodes
+changed), and listens. One markdown table comes out, a row per attack:
+
+- lowest point (mm) of either link: min over the elbow point and the tool point of y on
+  ``/sim/ground_truth`` (the shoulder pivot is at floor level, so below 0 is in the floor),
+  counted over the samples while the controller was commanding (its state not no_sensors,
+  estopped or disabled, and a ``voltage_command`` heard within the sim's
+  ``command_timeout_s``), and over all samples;
+- the control loop's period as heard here, in another process: the gaps between the DDS
+  reception times (rclpy's message info) of ``voltage_command``, p50 / p99 / worst, the
+  silences at the start and end of the attack included;
+- answers: goals answered (an event on ``controller/events`` taking or refusing it, or a
+  summary event with a count) against goals sent; service calls answered for the e-stops;
+- time to ready: after a controller restart, until it takes a goal again.
+
+    python bench/attacks.py                  # every attack, a few minutes
+    python bench/attacks.py --load           # ... with two busy loops on the machine
+    python bench/attacks.py --only flood --seconds 4
+
+Needs the package built and sourced (``ros_harness`` finds it on AMENT_PREFIX_PATH). Not a
+test: it asserts nothing and prints a table. Node logs stay in the directory it names.
+"""
+
+import argparse
+from contextlib import nullcontext
+import math
+import os
+from pathlib import Path
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE.parent / 'test'), str(HERE)]
+
+from arm_rig import ArmRig, BAD_GOALS, flood_goals, point, START_Q  # noqa: E402
+import busy  # noqa: E402
+from geometry_msgs.msg import PointStamped  # noqa: E402
+import numpy as np  # noqa: E402
+import rclpy  # noqa: E402
+from rclpy.duration import Duration  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from ros_harness import NodeProcess, Probe, ros_domain, ros_environment  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Float64MultiArray, String  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from arm_control import config  # noqa: E402
+from arm_control.nodes.common import COMMANDS, LATCHED  # noqa: E402
+
+ARM, SIM = config.load('sim')
+PRESETS = {name: (x, y) for name, x, y in ARM.presets}
+NOT_COMMANDING = ('no_sensors', 'estopped', 'disabled')
+BIG = 10 * 1024 * 1024                  # the oversized text, 10 MB
+READY_TIMEOUT_S = 90.0                  # bring-up, on a loaded machine too
+LOAD_BUDGET_S = 1800.0                  # the busy loops stop by themselves after this
+
+# What the listener keeps: every message of a burst, while this process is busy elsewhere.
+DEEP = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+DEEP_LATCHED = QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# A goal's answer: 'goal ... queued', 'goal ... accepted', 'goal rejected: ...',
+# "preset '...' rejected: ..." (the word before the reason); failures later are not answers.
+ANSWERS = ('queued', 'accepted', 'rejected')
+ANSWER = re.compile(r'^(?:goal|preset)\b[^:]*?\b(queued|accepted|rejected)\b')
+# A summary answering many goals at once: '25 goals rejected ...', '3 more goals ignored'.
+SUMMARY = re.compile(r'\b(\d+) (?:more )?goals? (?:were )?'
+                     r'(?:rejected|refused|ignored|unanswered|not answered|lost)\b')
+
+
+def y_lowest_m(shoulder, elbow):
+    """min(y_elbow, y_tool): y_elbow = La·sin θa, y_tool = y_elbow + Lb·sin(θa + θb)."""
+    y_elbow = ARM.shoulder.length_m * np.sin(shoulder)
+    return np.minimum(y_elbow, y_elbow + ARM.elbow.length_m * np.sin(shoulder + elbow))
+
+
+def point_of(q):
+    """The tool point (x, y) of a configuration."""
+    shoulder, elbow = q
+    upper, fore = ARM.shoulder.length_m, ARM.elbow.length_m
+    return (upper * math.cos(shoulder) + fore * math.cos(shoulder + elbow),
+            upper * math.sin(shoulder) + fore * math.sin(shoulder + elbow))
+
+
+def short(text: str, keep: int = 160) -> str:
+    return text if len(text) <= 2 * keep else \
+        f'{text[:keep]}...[{len(text)} characters]...{text[-keep // 2:]}'
+
+
+def arrival_s(info) -> float:
+    """When DDS received the message (the system clock, s), else now."""
+    stamp = info.get('received_timestamp') if isinstance(info, dict) else None
+    return stamp * 1e-9 if stamp else time.time()
+
+
+class Listener:
+    """What the bench hears, each message with its DDS reception time (time.time() clock)."""
+
+    def __init__(self, node):
+        self.voltage_s = []             # arrival times of voltage_command
+        self.truth = []                 # (t, shoulder, elbow), true angles
+        self.states = []                # (t, arm_state)
+        self.events = []                # (t, answer word or '', goals summarised, text)
+        self.arm2_state = ''
+        node.create_subscription(Float64MultiArray, '/voltage_command', self.on_voltage, DEEP)
+        node.create_subscription(JointState, '/sim/ground_truth', self.on_truth, DEEP)
+        node.create_subscription(String, '/arm_state', self.on_state, DEEP_LATCHED)
+        node.create_subscription(String, '/controller/events', self.on_event, DEEP)
+        node.create_subscription(String, '/arm2/arm_state', self.on_arm2_state, LATCHED)
+
+    def on_voltage(self, msg, info):
+        self.voltage_s.append(arrival_s(info))
+
+    def on_truth(self, msg, info):
+        angles = dict(zip(msg.name, msg.position))
+        if 'shoulder' in angles and 'elbow' in angles:
+            self.truth.append((arrival_s(info), angles['shoulder'], angles['elbow']))
+
+    def on_state(self, msg, info):
+        self.states.append((arrival_s(info), msg.data))
+
+    def on_event(self, msg, info):
+        answer = ANSWER.match(msg.data)
+        summary = None if answer else SUMMARY.search(msg.data)
+        self.events.append((arrival_s(info), answer.group(1) if answer else '',
+                            int(summary.group(1)) if summary else 0, short(msg.data)))
+
+    def on_arm2_state(self, msg):
+        self.arm2_state = msg.data
+
+    def answers(self, since_s: float, until_s: float = math.inf) -> int:
+        return sum((1 if word else count) for t, word, count, _ in self.events
+                   if since_s <= t <= until_s)
+
+    def said(self, since_s: float, *words) -> list:
+        return [text for t, _, _, text in self.events
+                if t >= since_s and any(w in text for w in words)]
+
+    def first_answer_s(self, since_s: float, words=('accepted', 'queued'), about=''):
+        for t, word, _, text in self.events:
+            if t >= since_s and word in words and about in text:
+                return t
+        return None
+
+    def truth_between(self, start_s: float, end_s: float) -> np.ndarray:
+        rows = [row for row in self.truth if start_s <= row[0] <= end_s]
+        return np.array(rows, float).reshape(-1, 3)
+
+
+def period_ms(arrivals, start_s: float, end_s: float):
+    """p50, p99 and worst gap (ms) between arrivals in [start_s, end_s], its edges counted:
+    a controller silent at the end of the window shows."""
+    inside = sorted(t for t in arrivals if start_s <= t <= end_s)
+    gaps = 1000.0 * np.diff([start_s, *inside, end_s])
+    return np.percentile(gaps, 50), np.percentile(gaps, 99), gaps.max(), len(inside)
+
+
+def lowest_points_mm(heard: Listener, start_s: float, end_s: float):
+    """(lowest while the controller commanded, lowest overall), mm, None without samples;
+    and where the first was: (its time after start_s, the controller's state then)."""
+    truth = heard.truth_between(start_s, end_s)
+    if not len(truth):
+        return None, None, None
+    times, lowest = truth[:, 0], 1000.0 * y_lowest_m(truth[:, 1], truth[:, 2])
+    state_times = np.array([t for t, _ in heard.states])
+    states = [s for _, s in heard.states]
+    voltage_times = np.sort(np.array(heard.voltage_s))
+    where = np.searchsorted(state_times, times, side='right') - 1
+    state = [states[i] if i >= 0 else '' for i in where]
+    last = np.searchsorted(voltage_times, times, side='right') - 1
+    fresh = (last >= 0) & (times - voltage_times[np.maximum(last, 0)]
+                           <= SIM.command_timeout_s) if len(voltage_times) else \
+        np.zeros(len(times), bool)
+    commanding = fresh & np.array([s not in NOT_COMMANDING and s != '' for s in state])
+    if not commanding.any():
+        return None, lowest.min(), None
+    index = np.flatnonzero(commanding)[np.argmin(lowest[commanding])]
+    return lowest[index], lowest.min(), (times[index] - start_s, state[index])
+
+
+class Bench:
+    """The rig, what it hears, and the means to attack it."""
+
+    def __init__(self, rig: ArmRig, heard: Listener, seconds: float):
+        self.rig, self.heard, self.seconds = rig, heard, seconds
+        node = rig.probe.node
+        self.preset_pub = node.create_publisher(String, '/goal_preset', COMMANDS)
+        self.set_state_pub = node.create_publisher(JointState, '/sim/set_state', COMMANDS)
+        self.estop = node.create_client(Trigger, '/controller/estop')
+        self.reset = node.create_client(Trigger, '/controller/reset')
+        self.cancel = node.create_client(Trigger, '/controller/cancel')
+        self.children = []              # processes started by attacks, stopped at the end
+        self.fresh_next = False         # the next attack needs the nodes started afresh
+
+    # ------------------------------------------------------------------ waiting
+
+    def wait_until(self, condition, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            left = deadline - time.monotonic()
+            if self.rig.spin_until(condition, min(0.5, max(left, 0.0))):
+                return True
+            self.trim()
+            if time.monotonic() >= deadline:
+                return condition()
+
+    def wait(self, seconds: float) -> None:
+        self.wait_until(lambda: False, seconds)
+
+    def trim(self) -> None:
+        """The rig keeps every message it hears (some of them 10 MB): keep the recent ones."""
+        rig = self.rig
+        for heard, keep in ((rig.truth, 500), (rig.joint_states, 500), (rig.voltages, 500),
+                            (rig.diagnostics, 20), (rig.events, 200), (rig.queue, 5),
+                            (rig.states, 50)):
+            del heard[:-keep]
+
+    # ------------------------------------------------------------------ speaking
+
+    def call(self, client, timeout_s: float = 5.0):
+        """A Trigger call on a kept client; the response, or None without one in time."""
+        if not self.wait_until(client.service_is_ready, timeout_s):
+            return None
+        future = client.call_async(Trigger.Request())
+        if not self.wait_until(future.done, timeout_s):
+            client.remove_pending_request(future)
+            return None
+        return future.result()
+
+    def publish(self, publisher, message, match_timeout_s: float = 5.0) -> None:
+        self.wait_until(lambda: publisher.get_subscription_count() > 0, match_timeout_s)
+        publisher.publish(message)
+
+    def send(self, x, y, frame='arm_base') -> None:
+        self.wait_until(lambda: self.rig.goal_pub.get_subscription_count() > 0, 5.0)
+        self.rig.send(x, y, frame=frame)
+
+    def child(self, *args) -> subprocess.Popen:
+        """This script in another process (``child`` mode) on the rig's domain."""
+        process = subprocess.Popen(
+            [sys.executable, __file__, 'child', args[0], str(self.rig.domain),
+             *map(str, args[1:])], env=ros_environment(self.rig.domain),
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.children.append(process)
+        return process
+
+    # ------------------------------------------------------------------ between attacks
+
+    def prepare(self) -> None:
+        """A held arm at its start: reset (sim reset, controller cleared), or started afresh
+        when the last attack asked for it, a node died, or the reset did not take."""
+        dead = [name for name, p in self.rig.processes.items() if not p.alive()]
+        if self.fresh_next or dead:
+            self.restart_all()
+        else:
+            try:
+                self.settle()
+            except (AssertionError, TimeoutError):
+                self.restart_all()
+        self.fresh_next = False
+
+    def settle(self) -> None:
+        if self.rig.state in ('estopped', 'error'):
+            self.call(self.reset)
+        self.call(self.cancel)
+        self.rig.reset_sim()
+        if not self.rig.wait_held(START_Q, timeout_s=1.5):
+            # The controller took the sim's reset back to where it last held the arm: a
+            # goal at the start puts every attack on the same footing.
+            since = time.time()
+            self.send(*point_of(START_Q))
+            if not self.wait_until(lambda: self.heard.said(since, 'reached'), 10.0):
+                raise TimeoutError('the arm did not go back to its start')
+
+    def restart_all(self) -> None:
+        self.rig.close()
+        del self.rig.states[:], self.rig.diagnostics[:]
+        self.rig.start_all()
+        self.rig.ready(READY_TIMEOUT_S)
+
+    def close(self) -> None:
+        for process in self.children:
+            if process.poll() is None:
+                process.kill()
+            process.wait()
+
+
+# ---------------------------------------------------------------------- the attacks
+# Each takes the Bench and returns what goes in its row: done (what was done), and where
+# it applies answers, ready and notes. The bench times the attack and reads the arm.
+
+
+def idle(b: Bench) -> dict:
+    b.wait(b.seconds)
+    return dict(done=f'the arm held {b.seconds:g} s, nothing sent')
+
+
+def moves(b: Bench) -> dict:
+    tour = ('mid_score', 'high_score', 'back_score', 'floor_pickup', 'stow')
+    since, reached = time.time(), 0
+    for name in tour:
+        sent = time.time()
+        b.send(*PRESETS[name])
+        b.wait_until(lambda: b.heard.said(sent, 'reached', 'failed', 'rejected'), b.seconds)
+        reached += bool(b.heard.said(sent, 'reached'))
+    return dict(done=f'goal_point tour {", ".join(tour)}, each once reached',
+                answers=f'{b.heard.answers(since)}/{len(tour)}',
+                notes=f'{reached} of {len(tour)} reached')
+
+
+def oversized(b: Bench) -> dict:
+    since = time.time()
+    b.publish(b.preset_pub, String(data='x' * BIG))
+    normal_s = time.time()
+    b.publish(b.preset_pub, String(data='mid_score'))
+    b.wait_until(lambda: b.heard.first_answer_s(normal_s, ANSWERS, "'mid_score'"),
+                 max(30.0, b.seconds))
+    normal_answer_s = b.heard.first_answer_s(normal_s, ANSWERS, "'mid_score'")
+    big_goal_s = time.time()
+    b.send(1.1, 0.9, frame='f' * BIG)
+    b.wait_until(lambda: b.heard.first_answer_s(big_goal_s, ANSWERS), max(30.0, b.seconds))
+    big_answer_s = b.heard.first_answer_s(big_goal_s, ANSWERS)
+    b.wait(b.seconds / 2)
+    b.fresh_next = True                 # what the controller keeps of the text stays with it
+
+    def after(answer_s, sent_s):
+        return f'answered after {answer_s - sent_s:.2f} s' if answer_s else 'never answered'
+    return dict(done="10 MB goal_preset, then preset 'mid_score'; then a goal_point with a "
+                     '10 MB frame_id',
+                answers=f'{b.heard.answers(since)}/3',
+                notes=f"'mid_score' {after(normal_answer_s, normal_s)}; the 10 MB frame_id "
+                      f'{after(big_answer_s, big_goal_s)}')
+
+
+def floor_line(b: Bench) -> dict:
+    goals = ((1.8, 0.0), (1.2, 0.0))
+    since = time.time()
+    for goal in goals:
+        b.send(*goal)
+    b.wait_until(lambda: len(b.heard.said(since, 'reached', 'failed', 'rejected'))
+                 >= len(goals), 3 * b.seconds)
+    b.wait(b.seconds / 2)
+    outcomes = ['reached' if text.startswith('reached') else text[:80]
+                for text in b.heard.said(since, 'reached', 'failed', 'rejected')]
+    return dict(done='goal_point (1.8, 0.0), then (1.2, 0.0), in arm_base',
+                answers=f'{b.heard.answers(since)}/{len(goals)}',
+                notes=f"outcomes: {', '.join(outcomes) or 'none heard'}")
+
+
+def estop_burst(b: Bench, pairs: int = 50) -> dict:
+    began, answered = time.monotonic(), 0
+    for _ in range(pairs):
+        for client in (b.estop, b.reset):
+            answered += b.call(client) is not None
+    took_s = time.monotonic() - began
+    b.wait(b.seconds / 2)
+    return dict(done=f'{pairs} controller/estop + controller/reset pairs, each call as soon '
+                     f'as the last was answered ({took_s:.1f} s)',
+                answers=f'{answered}/{2 * pairs} calls', notes=f'then {b.rig.state}')
+
+
+def graph_churn(b: Bench, nodes: int = 20) -> dict:
+    lifetime_s = 1.0
+    churn = b.child('churn', nodes, lifetime_s, max(b.seconds, 2.0) / nodes)
+    log_dir = b.rig.log_dir / f'arm2_{len(b.children)}'
+    log_dir.mkdir(parents=True, exist_ok=True)
+    began = time.monotonic()
+    arm2 = [NodeProcess(name, b.rig.domain, ('-r', '__ns:=/arm2'), log_dir)
+            for name in ArmRig.NODES]
+    b.heard.arm2_state = ''
+    up = b.wait_until(lambda: b.heard.arm2_state == 'waiting', 60.0)
+    up_s = time.monotonic() - began
+    b.wait(2.0)
+    for process in arm2:
+        process.stop()
+    b.wait_until(lambda: churn.poll() is not None, 30.0)
+    b.wait(b.seconds / 4)
+    said = churn.communicate(timeout=10.0)[0].strip().splitlines() if churn.poll() is not None \
+        else ['still running']
+    return dict(done=f'{nodes} rclpy nodes of {lifetime_s:g} s each (own participant, pub/sub/'
+                     'service) from another process; sim+planner+controller started in /arm2, '
+                     'then stopped',
+                notes=f"/arm2 {'waiting' if up else 'not up'} after {up_s:.1f} s; churn: "
+                      f'{said[-1] if said else "?"}')
+
+
+def flood(b: Bench, count: int = 2000) -> dict:
+    since = time.time()
+    child = b.child('flood', count)
+    b.wait_until(lambda: child.poll() is not None, 60.0)
+    # The answers settle: none new for 2 s (or the time is up).
+    counted, steady_since, deadline = -1, time.monotonic(), time.monotonic() + 3 * b.seconds
+    while time.monotonic() < deadline and time.monotonic() - steady_since < 2.0:
+        b.wait(0.25)
+        now = b.heard.answers(since)
+        if now != counted:
+            counted, steady_since = now, time.monotonic()
+    said = child.communicate(timeout=10.0)[0].strip().splitlines() if child.poll() is not None \
+        else ['still running']
+    b.call(b.cancel)
+    b.wait(b.seconds / 4)
+    good = len(flood_goals()) - len(BAD_GOALS)
+    return dict(done=f'{count} goal_points published at once from another process '
+                     f'({good} good, {len(BAD_GOALS)} bad kinds in turn), publisher depth '
+                     f'{count}',
+                answers=f'{b.heard.answers(since)}/{count}',
+                notes=f'publisher: {said[-1] if said else "?"}; queue cancelled after')
+
+
+def set_state_names(b: Bench) -> dict:
+    shoulder, elbow = 1.2, -0.6
+    message = JointState(name=['elbow', 'shoulder'], position=[elbow, shoulder],
+                         velocity=[0.0, 0.0])
+    since = time.time()
+    b.publish(b.set_state_pub, message)
+    b.wait(max(1.0, b.seconds / 4))
+    limits = [(j.min_angle_rad, j.max_angle_rad) for j in ARM.joints]
+
+    def clipped(q):
+        return np.array([np.clip(a, *limit) for a, limit in zip(q, limits)])
+    by_name, by_order = clipped((shoulder, elbow)), clipped((elbow, shoulder))
+    truth = b.heard.truth_between(since, since + 1.0)[:, 1:]
+    if not len(truth):
+        verdict = 'no ground truth heard'
+    else:
+        near_name = np.abs(truth - by_name).max(axis=1).min()
+        near_order = np.abs(truth - by_order).max(axis=1).min()
+        verdict = ('applied by name' if near_name < 0.05 else
+                   f'applied by position: shoulder {by_order[0]:.2f}, elbow {by_order[1]:.2f} '
+                   'rad' if near_order < 0.05 else 'not applied as sent')
+    return dict(done=f'sim/set_state name [elbow, shoulder] position [{elbow}, {shoulder}]: '
+                     f'meant shoulder {shoulder}, elbow {elbow} rad',
+                notes=verdict)
+
+
+def controller_restart(b: Bench) -> dict:
+    b.wait(b.seconds / 4)
+    killed_s = time.time()
+    b.rig.kill('controller')
+    b.rig.start('controller')
+    started_s = time.time()
+    x, y = (float(v) for v in point_of(START_Q))
+    while time.time() - started_s < READY_TIMEOUT_S:
+        b.send(x, y)
+        if b.wait_until(lambda: b.heard.first_answer_s(started_s), 0.25):
+            break
+    accepted_s = b.heard.first_answer_s(started_s)
+
+    def commands_since_start():        # the new process's: the old one is gone by then
+        return [t for t in b.heard.voltage_s if t > started_s]
+    b.wait_until(commands_since_start, READY_TIMEOUT_S - (time.time() - started_s))
+    b.wait(b.seconds / 4)
+    before = [t for t in b.heard.voltage_s if t <= started_s]
+    after = commands_since_start()
+    silent_from_s = before[-1] if before else killed_s
+    if after:
+        truth = b.heard.truth_between(after[0], math.inf)
+        found = f'{1000 * y_lowest_m(*truth[0, 1:]):.0f} mm' if len(truth) else 'not heard'
+        commands = (f'voltage_command silent {after[0] - silent_from_s:.2f} s (0 V after '
+                    f'{SIM.command_timeout_s:g} s of it), resumed {after[0] - started_s:.1f} '
+                    f's after the start; lowest point {found} then')
+    else:
+        commands = f'voltage_command still silent {time.time() - silent_from_s:.1f} s on'
+    return dict(done=f'controller SIGKILLed while holding, started again at once; a goal at '
+                     f'({x:.2f}, {y:.2f}) every 0.25 s until one is taken',
+                ready=f'{accepted_s - started_s:.1f} s' if accepted_s else 'never',
+                notes=commands)
+
+
+ATTACKS = {
+    'idle': idle,
+    'moves': moves,
+    'oversized': oversized,
+    'floor_line': floor_line,
+    'estop_burst': estop_burst,
+    'graph_churn': graph_churn,
+    'flood': flood,
+    'set_state_names': set_state_names,
+    'controller_restart': controller_restart,
+}
+
+
+# ---------------------------------------------------------------------- running them
+
+
+def run_attack(b: Bench, name: str) -> dict:
+    print(f'== {name}', file=sys.stderr, flush=True)
+    try:
+        b.prepare()
+    except Exception as error:
+        return dict(attack=name, done='not run', notes=f'the arm could not be prepared: '
+                                                       f'{short(str(error), 100)}')
+    # Another system on the domain would mix its arm into the readings.
+    node = b.rig.probe.node
+    counts = {topic: node.count_publishers(topic)
+              for topic in ('/sim/ground_truth', '/voltage_command')}
+    strangers = [f'{count} publishers of {topic} at the start'
+                 for topic, count in counts.items() if count > 1]
+    start_s = time.time()
+    try:
+        row = ATTACKS[name](b)
+    except Exception as error:          # the bench carries on; the next attack starts afresh
+        row = dict(done='(stopped by an error in the bench)', notes=repr(error))
+        b.fresh_next = True
+    end_s = time.time()
+    p50, p99, worst, count = period_ms(b.heard.voltage_s, start_s, end_s)
+    commanding, overall, where = lowest_points_mm(b.heard, start_s, end_s)
+    if where:
+        print(f'   lowest while commanding {commanding:.0f} mm, {where[0]:.1f} s in, in state '
+              f'{where[1]}; {len(b.heard.truth_between(start_s, end_s))} true samples',
+              file=sys.stderr, flush=True)
+    dead = [n for n, p in b.rig.processes.items() if not p.alive()]
+    notes = [row.get('notes', ''), *incidents(b.heard, start_s, end_s)] + \
+        ([f'died: {", ".join(dead)}'] if dead else [])
+    notes += strangers
+    return dict(row, attack=name, commanding=commanding, overall=overall,
+                period=f'{p50:.1f} / {p99:.1f} / {worst:.0f}', heard=count,
+                notes='; '.join(n for n in notes if n), seconds=end_s - start_s)
+
+
+def incidents(heard: Listener, start_s: float, end_s: float) -> list:
+    """What the controller said of e-stops and of lost joint states (it sends 0 V then)."""
+    said = [text for t, _, _, text in heard.events if start_s <= t <= end_s]
+    estops = [text.split(';')[0].removeprefix('E-STOP: ') for text in said
+              if text.startswith('E-STOP')]
+    lost = sum('no joint states' in text and not text.startswith('E-STOP') for text in said)
+    out = []
+    if estops:
+        more = ', ...' if len(set(estops)) > 1 else ''
+        out.append(f'{len(estops)} e-stops ({short(estops[0], 30)}{more})')
+    if lost:
+        out.append(f'joint states lost {lost} times (0 V)')
+    return out
+
+
+def print_table(rows, heading: str) -> None:
+    def mm(value):
+        return '-' if value is None else f'{value:.0f}'
+    print(f'\n{heading}\n')
+    print('| attack | what was done | lowest point while commanding (mm) | lowest point '
+          'overall (mm) | voltage_command period p50 / p99 / worst (ms) | answers | time to '
+          'ready | notes |')
+    print('|---|---|---|---|---|---|---|---|')
+    for row in rows:
+        print(f"| {row['attack']} | {row['done']} | {mm(row.get('commanding'))} | "
+              f"{mm(row.get('overall'))} | {row.get('period', '-')} | "
+              f"{row.get('answers') or '-'} | {row.get('ready') or '-'} | "
+              f"{row.get('notes', '').replace('|', '/')} |")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--load', action='store_true',
+                        help='two busy-loop processes on the machine throughout')
+    parser.add_argument('--only', choices=list(ATTACKS), help='run this attack alone')
+    parser.add_argument('--seconds', type=float, default=8.0,
+                        help='how long an attack watches the arm; other waits scale with it')
+    parser.add_argument('--domain', type=int,
+                        help='a ROS domain reserved for you (default: a free one, locked as '
+                             'the tests lock theirs)')
+    args = parser.parse_args()
+    names = [args.only] if args.only else list(ATTACKS)
+    # Stopped from outside (timeout, kill): still stop the nodes, or they outlive the
+    # domain's lock and disturb whoever takes the domain next.
+    signal.signal(signal.SIGTERM, _interrupt)
+    load_before = os.getloadavg()[0]
+    load = busy.start(2, LOAD_BUDGET_S) if args.load else []
+    try:
+        with ros_domain() if args.domain is None else nullcontext(args.domain) as domain:
+            probe = Probe(domain, 'attacks')
+            heard = Listener(probe.node)
+            rig = ArmRig(domain, probe, Path(tempfile.mkdtemp(prefix='arm_attacks_')))
+            bench = Bench(rig, heard, args.seconds)
+            try:
+                began = time.monotonic()
+                rig.start_all()
+                rig.ready(READY_TIMEOUT_S)
+                bring_up_s = time.monotonic() - began
+                rows = [run_attack(bench, name) for name in names]
+                took_s = time.monotonic() - began
+            finally:
+                bench.close()
+                rig.close()
+                probe.close()
+    finally:
+        busy.stop(load)
+    load_said = 'two busy loops added' if args.load else 'no load added'
+    print_table(rows, f'Attacks ({load_said}; --seconds {args.seconds:g}): bring-up '
+                      f'{bring_up_s:.1f} s, all {took_s:.0f} s; load average '
+                      f'{load_before:.1f} before, {os.getloadavg()[0]:.1f} after; node logs in '
+                      f'{rig.log_dir}')
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+# ---------------------------------------------------------------------- child processes
+
+
+def flood_child(domain: int, count: int) -> None:
+    """Publish ``count`` goals at once, good and bad in turn, from a publisher that keeps
+    them all until the controller has them (or 30 s pass)."""
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node('attack_flood', context=context)
+    publisher = node.create_publisher(
+        PointStamped, '/goal_point',
+        QoSProfile(depth=count, reliability=ReliabilityPolicy.RELIABLE))
+    deadline = time.monotonic() + 10.0
+    while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    goals = [point(**goal) for goal in flood_goals()]
+    began = time.monotonic()
+    for index in range(count):
+        publisher.publish(goals[index % len(goals)])
+    published_s = time.monotonic() - began
+    acked = publisher.wait_for_all_acked(Duration(seconds=30.0))
+    print(f'{count} published in {published_s:.2f} s, all acknowledged: {acked}')
+    node.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+
+def churn_child(domain: int, count: int, lifetime_s: float, interval_s: float) -> None:
+    """``count`` nodes, one every ``interval_s``, each living ``lifetime_s`` with a
+    participant of its own, a publisher, two subscriptions to the arm's topics and a
+    service, as a user's tools come and go."""
+    live, started, next_s = [], 0, time.monotonic()
+    began = time.monotonic()
+    while started < count or live:
+        now = time.monotonic()
+        if started < count and now >= next_s:
+            context = rclpy.Context()
+            rclpy.init(context=context, domain_id=domain)
+            node = rclpy.create_node(f'churn_{started}', context=context)
+            chatter = node.create_publisher(String, '/churn/chatter', 10)
+            node.create_subscription(JointState, '/joint_states', lambda m: None, 10)
+            node.create_subscription(Float64MultiArray, '/voltage_command', lambda m: None, 10)
+            node.create_service(Trigger, f'/churn_{started}/ping', lambda q, r: r)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            live.append((now, context, node, chatter, executor))
+            started += 1
+            next_s += interval_s
+        for entry in [e for e in live if now - e[0] >= lifetime_s]:
+            _, context, node, _, executor = entry
+            executor.shutdown()
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)
+            live.remove(entry)
+        for _, _, _, chatter, executor in live:
+            chatter.publish(String(data='churn'))
+            executor.spin_once(timeout_sec=0.0)
+        time.sleep(0.02)
+    print(f'{count} nodes came and went in {time.monotonic() - began:.1f} s')
+
+
+if __name__ == '__main__':
+    if sys.argv[1:2] == ['child']:
+        kind, numbers = sys.argv[2], [float(v) for v in sys.argv[3:]]
+        if kind == 'flood':
+            flood_child(int(numbers[0]), int(numbers[1]))
+        else:
+            churn_child(int(numbers[0]), int(numbers[1]), numbers[2], numbers[3])
+    else:
+        main()
