@@ -30,7 +30,6 @@ from contextlib import nullcontext
 import math
 import os
 from pathlib import Path
-import re
 import signal
 import subprocess
 import sys
@@ -54,6 +53,7 @@ from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from arm_control import config  # noqa: E402
+from arm_control.control.events import parse_event  # noqa: E402
 from arm_control.nodes.common import COMMANDS, LATCHED  # noqa: E402
 
 ARM, SIM = config.load('sim')
@@ -67,13 +67,10 @@ LOAD_BUDGET_S = 1800.0                  # the busy loops stop by themselves afte
 DEEP = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
 DEEP_LATCHED = QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
-# A goal's answer: 'goal ... queued', 'goal ... accepted', 'goal rejected: ...',
-# "preset '...' rejected: ..." (the word before the reason); failures later are not answers.
-ANSWERS = ('queued', 'accepted', 'rejected')
-ANSWER = re.compile(r'^(?:goal|preset)\b[^:]*?\b(queued|accepted|rejected)\b')
-# A summary answering many goals at once: '25 goals rejected ...', '3 more goals ignored'.
-SUMMARY = re.compile(r'\b(\d+) (?:more )?goals? (?:were )?'
-                     r'(?:rejected|refused|ignored|unanswered|not answered|lost)\b')
+# The events that answer a goal (failures later are not answers), and the one that counts
+# a window's rejections beyond the burst ('goals_rejected: 1968 more goals rejected ...').
+ANSWERS = ('goal_queued', 'goal_accepted', 'goal_rejected')
+SUMMARY = 'goals_rejected'
 
 
 def y_lowest_m(shoulder, elbow):
@@ -108,7 +105,7 @@ class Listener:
         self.voltage_s = []             # arrival times of voltage_command
         self.truth = []                 # (t, shoulder, elbow), true angles
         self.states = []                # (t, arm_state)
-        self.events = []                # (t, answer word or '', goals summarised, text)
+        self.events = []                # (t, kind, goals it answers, text)
         self.arm2_state = ''
         node.create_subscription(Float64MultiArray, '/voltage_command', self.on_voltage, DEEP)
         node.create_subscription(JointState, '/sim/ground_truth', self.on_truth, DEEP)
@@ -128,25 +125,23 @@ class Listener:
         self.states.append((arrival_s(info), msg.data))
 
     def on_event(self, msg, info):
-        answer = ANSWER.match(msg.data)
-        summary = None if answer else SUMMARY.search(msg.data)
-        self.events.append((arrival_s(info), answer.group(1) if answer else '',
-                            int(summary.group(1)) if summary else 0, short(msg.data)))
+        kind, _, sentence = parse_event(msg.data)
+        answered = int(sentence.split()[0]) if kind == SUMMARY else int(kind in ANSWERS)
+        self.events.append((arrival_s(info), kind, answered, short(msg.data)))
 
     def on_arm2_state(self, msg):
         self.arm2_state = msg.data
 
     def answers(self, since_s: float, until_s: float = math.inf) -> int:
-        return sum((1 if word else count) for t, word, count, _ in self.events
-                   if since_s <= t <= until_s)
+        return sum(count for t, _, count, _ in self.events if since_s <= t <= until_s)
 
-    def said(self, since_s: float, *words) -> list:
-        return [text for t, _, _, text in self.events
-                if t >= since_s and any(w in text for w in words)]
+    def said(self, since_s: float, *kinds) -> list:
+        return [text for t, kind, _, text in self.events if t >= since_s and kind in kinds]
 
-    def first_answer_s(self, since_s: float, words=('accepted', 'queued'), about=''):
-        for t, word, _, text in self.events:
-            if t >= since_s and word in words and about in text:
+    def first_answer_s(self, since_s: float, kinds=('goal_accepted', 'goal_queued'),
+                       about=''):
+        for t, kind, _, text in self.events:
+            if t >= since_s and kind in kinds and about in text:
                 return t
         return None
 
@@ -277,7 +272,7 @@ class Bench:
             # goal at the start puts every attack on the same footing.
             since = time.time()
             self.send(*point_of(START_Q))
-            if not self.wait_until(lambda: self.heard.said(since, 'reached'), 10.0):
+            if not self.wait_until(lambda: self.heard.said(since, 'goal_reached'), 10.0):
                 raise TimeoutError('the arm did not go back to its start')
 
     def restart_all(self) -> None:
@@ -309,8 +304,9 @@ def moves(b: Bench) -> dict:
     for name in tour:
         sent = time.time()
         b.send(*PRESETS[name])
-        b.wait_until(lambda: b.heard.said(sent, 'reached', 'failed', 'rejected'), b.seconds)
-        reached += bool(b.heard.said(sent, 'reached'))
+        b.wait_until(lambda: b.heard.said(sent, 'goal_reached', 'goal_failed', 'goal_rejected'),
+                     b.seconds)
+        reached += bool(b.heard.said(sent, 'goal_reached'))
     return dict(done=f'goal_point tour {", ".join(tour)}, each once reached',
                 answers=f'{b.heard.answers(since)}/{len(tour)}',
                 notes=f'{reached} of {len(tour)} reached')
@@ -345,11 +341,11 @@ def floor_line(b: Bench) -> dict:
     since = time.time()
     for goal in goals:
         b.send(*goal)
-    b.wait_until(lambda: len(b.heard.said(since, 'reached', 'failed', 'rejected'))
+    b.wait_until(lambda: len(b.heard.said(since, 'goal_reached', 'goal_failed', 'goal_rejected'))
                  >= len(goals), 3 * b.seconds)
     b.wait(b.seconds / 2)
-    outcomes = ['reached' if text.startswith('reached') else text[:80]
-                for text in b.heard.said(since, 'reached', 'failed', 'rejected')]
+    outcomes = ['reached' if text.startswith('goal_reached') else text[:80]
+                for text in b.heard.said(since, 'goal_reached', 'goal_failed', 'goal_rejected')]
     return dict(done='goal_point (1.8, 0.0), then (1.2, 0.0), in arm_base',
                 answers=f'{b.heard.answers(since)}/{len(goals)}',
                 notes=f"outcomes: {', '.join(outcomes) or 'none heard'}")
@@ -528,10 +524,10 @@ def run_attack(b: Bench, name: str) -> dict:
 
 def incidents(heard: Listener, start_s: float, end_s: float) -> list:
     """What the controller said of e-stops and of lost joint states (it sends 0 V then)."""
-    said = [text for t, _, _, text in heard.events if start_s <= t <= end_s]
-    estops = [text.split(';')[0].removeprefix('E-STOP: ') for text in said
-              if text.startswith('E-STOP')]
-    lost = sum('no joint states' in text and not text.startswith('E-STOP') for text in said)
+    said = [(kind, text) for t, kind, _, text in heard.events if start_s <= t <= end_s]
+    estops = [parse_event(text)[2].split(';')[0].removeprefix('E-STOP: ')
+              for kind, text in said if kind in ('estop', 'control_failed')]
+    lost = sum(kind == 'sensors_lost' for kind, _ in said)
     out = []
     if estops:
         more = ', ...' if len(set(estops)) > 1 else ''

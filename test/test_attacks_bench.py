@@ -71,17 +71,17 @@ def test_lowest_point_while_commanding_leaves_out_estopped_and_stale_commands():
 
 def test_events_that_answer_a_goal():
     heard = attacks.Listener(NoNode())
-    for text in ['goal (1.100, 0.900) m queued (1 waiting)',
-                 "goal preset 'mid_score' accepted: next",
-                 'goal rejected: goal (1.0, 1.0) m is in frame map',
-                 "preset 'nope' rejected: no such preset (known: stow)",
-                 '25 goals rejected in the last second: the queue is full',
-                 'goal (1.0, 1.0) m failed: the planner did not answer; it was rejected',
-                 'reached (1.100, 0.900) m 0.35 s after starting it',
-                 'cancelled: 3 goals dropped; holding']:
+    for text in ['goal_queued: goal (1.100, 0.900) m queued (1 waiting)',
+                 "goal_accepted: goal preset 'mid_score' accepted: next",
+                 'goal_rejected (wrong frame): goal rejected: goal (1.0, 1.0) m is in frame map',
+                 "goal_rejected (no such preset): preset 'nope' rejected: no such preset",
+                 'goals_rejected: 25 more goals rejected in the last 1.0 s (25 the queue full)',
+                 'goal_failed: goal (1.0, 1.0) m failed: the planner did not answer',
+                 'goal_reached: reached (1.100, 0.900) m 0.35 s after starting it',
+                 'cancelled: cancelled: 3 goals dropped; holding']:
         heard.on_event(attacks.String(data=text), {'received_timestamp': 10**9})
-    assert [word for _, word, _, _ in heard.events][:4] == \
-        ['queued', 'accepted', 'rejected', 'rejected']
+    assert [kind for _, kind, _, _ in heard.events][:4] == \
+        ['goal_queued', 'goal_accepted', 'goal_rejected', 'goal_rejected']
     assert heard.answers(0.0) == 4 + 25
 
 
