@@ -176,24 +176,50 @@ class ArmDynamics:
         """b·q̇ + c·tanh(q̇/ω_s), (..., 2)."""
         return self._b * qd + self._c * np.tanh(qd / COULOMB_SMOOTHING_RAD_S)
 
+    def _friction_column(self, joint: int, w):
+        """b·ω + c·tanh(ω/ω_s) of one joint, for a column of speeds."""
+        b, c = self.viscous[joint], self.coulomb[joint]
+        return b * w + c * np.tanh(w / COULOMB_SMOOTHING_RAD_S) if c else b * w
+
     def voltages(self, q, qd, qdd) -> np.ndarray:
         """``voltage_for`` on arrays (..., 2): V = k·(M q̈ + C q̇ + τg + τ_friction) + e·q̇."""
         q, qd, qdd = (np.asarray(v, float) for v in (q, qd, qdd))
-        torque = self.mass_times(q, qdd) + self.coriolis(q, qd) + self.gravity(q) \
-            + self.friction(qd)
-        return self._k * torque + self._e * qd
+        q0, q1, w0, w1, a0, a1 = q[..., 0], q[..., 1], qd[..., 0], qd[..., 1], qdd[..., 0], \
+            qdd[..., 1]
+        cos_b = np.cos(q1)
+        h = self.beta * np.sin(q1)
+        fore = self.g_fore * np.cos(q0 + q1)
+        m01 = self.gamma + self.beta * cos_b
+        torque0 = ((self.alpha + 2.0 * self.beta * cos_b) * a0 + m01 * a1
+                   - h * w1 * (2.0 * w0 + w1) + self.g_upper * np.cos(q0) + fore
+                   + self._friction_column(0, w0))
+        torque1 = m01 * a0 + self.gamma * a1 + h * w0 * w0 + fore + self._friction_column(1, w1)
+        out = np.empty(np.broadcast_shapes(q.shape, qd.shape, qdd.shape))
+        out[..., 0] = self.volts_per_nm[0] * torque0 + self.emf_v_per_rad_s[0] * w0
+        out[..., 1] = self.volts_per_nm[1] * torque1 + self.emf_v_per_rad_s[1] * w1
+        return out
 
     def accelerations(self, x, u) -> np.ndarray:
-        """q̈ (..., 2) for states x (..., 4) and applied volts u (..., 2)."""
-        q, qd = x[..., :2], x[..., 2:]
-        drive = ((u - self._e * qd) / self._k - self.friction(qd)
-                 - self.coriolis(q, qd) - self.gravity(q))
-        cos_b = np.cos(q[..., 1])
+        """q̈ (..., 2) for states x (..., 4) and applied volts u (..., 2):
+        M q̈ = (V − e·q̇)/k − τ_friction − C q̇ − τg."""
+        q0, q1, w0, w1 = x[..., 0], x[..., 1], x[..., 2], x[..., 3]
+        cos_b = np.cos(q1)
+        h = self.beta * np.sin(q1)
+        fore = self.g_fore * np.cos(q0 + q1)
+        (k0, k1), (e0, e1) = self.volts_per_nm, self.emf_v_per_rad_s
+        drive0 = ((u[..., 0] - e0 * w0) / k0 - self._friction_column(0, w0)
+                  + h * w1 * (2.0 * w0 + w1) - self.g_upper * np.cos(q0) - fore)
+        drive1 = (u[..., 1] - e1 * w1) / k1 - self._friction_column(1, w1) - h * w0 * w0 - fore
         m00, m01 = self.alpha + 2.0 * self.beta * cos_b, self.gamma + self.beta * cos_b
         det = m00 * self.gamma - m01 * m01
-        return np.stack([(self.gamma * drive[..., 0] - m01 * drive[..., 1]) / det,
-                         (m00 * drive[..., 1] - m01 * drive[..., 0]) / det], axis=-1)
+        out = np.empty(np.broadcast_shapes(x.shape[:-1] + (2,), np.shape(u)))
+        out[..., 0] = (self.gamma * drive0 - m01 * drive1) / det
+        out[..., 1] = (m00 * drive1 - m01 * drive0) / det
+        return out
 
     def derivatives(self, x, u) -> np.ndarray:
         """f(x, u) for states (..., 4) and volts (..., 2): [q̇, q̈], (..., 4)."""
-        return np.concatenate([x[..., 2:], self.accelerations(x, u)], axis=-1)
+        out = np.empty(x.shape)
+        out[..., :2] = x[..., 2:]
+        out[..., 2:] = self.accelerations(x, u)
+        return out

@@ -130,17 +130,24 @@ class ForbiddenSpace:
         and 5 deg of direction) that is ``clear_by`` the margin and reached by a straight
         segment that, once free, stays free; None within ``reach_rad``."""
         q = np.asarray(q, dtype=float)
-        radii = np.arange(0.0, reach_rad + 1e-12, margin_rad / 2.0)
         angles = np.radians(np.arange(0.0, 360.0, 5.0))
         directions = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
-        candidates = (q + radii[:, None, None] * directions).reshape(-1, 2)
-        distances = np.repeat(radii, len(angles))
-        for index in np.flatnonzero(self.clear_by(candidates, margin_rad)):
-            target = candidates[index]
-            count = max(2, int(math.ceil(distances[index] / self.check_step_rad)) + 1)
-            free = self._free(q + np.linspace(0.0, 1.0, count)[:, None] * (target - q))
-            if np.all(free[np.argmax(free):]):
-                return target
+        # Radius by radius, each ring's candidates and their segments checked at once: the
+        # nearest ring with a way there ends the search (a few ms, not a scan of them all).
+        for radius in np.arange(0.0, reach_rad + 1e-12, margin_rad / 2.0):
+            ring = q + radius * directions[:1 if radius == 0.0 else None]
+            clear = ring[np.asarray(self.clear_by(ring, margin_rad), dtype=bool).reshape(-1)]
+            if len(clear) == 0:
+                continue
+            count = max(2, int(math.ceil(radius / self.check_step_rad)) + 1)
+            steps = np.linspace(0.0, 1.0, count)[None, :, None]
+            free = np.asarray(self._free(q + steps * (clear[:, None, :] - q)), dtype=bool)
+            # Once free, stays free: no forbidden sample after the first free one.
+            first_free = np.argmax(free, axis=1)
+            after = np.arange(count)[None, :] >= first_free[:, None]
+            good = np.all(free | ~after, axis=1)
+            if np.any(good):
+                return clear[np.argmax(good)]
         return None
 
     def lowest_point_m(self, q) -> np.ndarray:
