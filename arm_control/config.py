@@ -219,6 +219,7 @@ class SimConfig:
     rest_until_first_command: bool
     random_seed: int
     sim_time_factor: float          # 0: the node's clock; else /clock at this × real time
+    realtime_priority: int          # SCHED_FIFO priority of the sim's threads; 0: normal
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'SimConfig':
@@ -231,6 +232,7 @@ class SimConfig:
             rest_until_first_command=read.boolean('rest_until_first_command'),
             random_seed=read.integer('random_seed', low=-1),
             sim_time_factor=read.number('sim_time_factor', low=0.0, high=100.0),
+            realtime_priority=read.integer('realtime_priority', low=0, high=98),
         )
 
 
@@ -239,6 +241,7 @@ class ControllerConfig:
     """The controller's loop, tolerances, limits, gains and safety rules."""
 
     loop_rate_hz: float
+    realtime_priority: int          # SCHED_FIFO priority of the loop (the rest 1 below); 0: off
     goal_tolerance_rad: float
     settled_velocity_rad_s: float
     dwell_s: float
@@ -283,6 +286,7 @@ class ControllerConfig:
 
         return cls(
             loop_rate_hz=read.number('loop_rate_hz', low=0.0, high=1000.0, low_open=True),
+            realtime_priority=read.integer('realtime_priority', low=0, high=98),
             goal_tolerance_rad=read.positive('goal_tolerance_rad'),
             settled_velocity_rad_s=read.positive('settled_velocity_rad_s'),
             dwell_s=read.nonnegative('dwell_s'),

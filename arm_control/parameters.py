@@ -64,6 +64,15 @@ def read_parameter_files(paths, node_name: str) -> dict[str, Any]:
     return flat
 
 
+def package_parameter_names(path) -> set[str]:
+    """Every parameter name any section of ``path`` gives (all the package's nodes)."""
+    document = yaml.safe_load(Path(path).read_text())
+    names: dict[str, Any] = {}
+    for body in document.values():
+        _flatten(body['ros__parameters'], '', names)
+    return set(names)
+
+
 def parameter_descriptions(path, node_name: str) -> dict[str, str]:
     """Each of ``node_name``'s parameters' description: the comment on its line of the file,
     else its section's; the node's own section's over ``/**``'s (names repeat across nodes).
@@ -129,12 +138,12 @@ class Reader:
     def nonnegative(self, name) -> float:
         return self.number(name, low=0.0)
 
-    def integer(self, name, *, low=-(2 ** 63)) -> int:
+    def integer(self, name, *, low=-(2 ** 63), high=2 ** 63 - 1) -> int:
         value = self._raw(name)
         if isinstance(value, bool) or not isinstance(value, int):
             raise ParameterError(f"parameter '{name}' = {value!r}: expected an integer")
-        if value < low:
-            raise ParameterError(f"parameter '{name}' = {value!r}: must be >= {low}")
+        if not low <= value <= high:
+            raise ParameterError(f"parameter '{name}' = {value!r}: must be in [{low}, {high}]")
         return value
 
     def boolean(self, name) -> bool:

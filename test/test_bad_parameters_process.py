@@ -34,8 +34,11 @@ NODE_FILES = [
     ('controller',
      '/**:\n  ros__parameters:\n    world:\n      forbidden_regions: [floor, wall]\n',
      "parameter 'world.regions.wall' is missing"),
-    ('planner', '/planner:\n  ros__parameters:\n    check_step_rad: fine\n',
-     "'check_step_rad' = 'fine': expected a number"),
+    ('planner', '/planner:\n  ros__parameters:\n    world:\n      check_step_rad: fine\n',
+     "'world.check_step_rad' = 'fine': expected a number"),
+    ('planner', '/planner:\n  ros__parameters:\n    check_step_rad: 0.001\n',
+     "'check_step_rad' is not a parameter of arm_control (did you mean "
+     "'world.check_step_rad'?)"),
     ('planner', '/**:\n  ros__parameters:\n    presets:\n      names: [stow, shelf]\n',
      "parameter 'presets.shelf' is missing"),
     ('planner', '/planner:\n  ros__parameters:\n    grid_resolution_rad:\n',

@@ -174,8 +174,13 @@ def test_flood_of_goals_bounded_memory_and_loop_rate(rig):
         return int(last['goals rejected']) + int(last['goals queued']) - before
     rig.spin_until(lambda: taken() >= sent, 5.0)
     counted = taken()
-    answered = len(rig.said('goal_queued', began)) + len(rig.said('goal_rejected', began)) \
-        + sum(int(sentence.split()[0]) for _, _, sentence in rig.said('goals_rejected', began))
+
+    def answers():          # said one by one, or counted in the summary of each second
+        return len(rig.said('goal_queued', began)) + len(rig.said('goal_rejected', began)) \
+            + sum(int(sentence.split()[0]) for _, _, sentence in rig.said('goals_rejected',
+                                                                          began))
+    rig.spin_until(lambda: answers() >= counted, 3.0)       # the last second's summary
+    answered = answers()
     # The loop kept its rate: voltage commands as the probe heard them during the flood,
     # and the loop's own worst period each second (its diagnostics).
     heard = [t for t, _ in rig.voltages if began + 1.0 <= t <= ended - 0.5]

@@ -1,21 +1,26 @@
 """The control loop's beat: ``tick`` once per period on the node's clock, in a thread of its
-own, so that no callback, burst of messages or graph change in the node's executor delays a
-command. A plan that becomes ready wakes it at once (``poke``): the motion starts then, not at
-the next period, and the periods run on from there."""
+own at real-time priority where allowed, so that no callback, burst of messages, graph change
+or busy process delays a command. A plan that becomes ready wakes it at once (``poke``): the
+motion starts then, not at the next period, and the periods run on from there."""
 
 import threading
 
 from rclpy.clock import ClockType
+
+from arm_control.nodes.realtime import raise_this_thread
 
 # With simulated time the clock only moves when /clock does: look this often (wall s).
 SIM_TIME_POLL_S = 0.001
 
 
 class ControlLoop:
-    """Calls ``tick()`` every ``period_s`` of ``clock`` time, and at once when poked."""
+    """Calls ``tick()`` every ``period_s`` of ``clock`` time, and at once when poked;
+    ``priority_problem`` says why the thread could not run at ``realtime_priority``."""
 
-    def __init__(self, clock, period_s: float, tick):
+    def __init__(self, clock, period_s: float, tick, realtime_priority: int = 0):
         self.clock, self.period_s, self.tick = clock, period_s, tick
+        self.realtime_priority = realtime_priority
+        self.priority_problem = None
         self._wake = threading.Event()
         self._stopping = False
         self._thread = threading.Thread(target=self._run, daemon=True, name='control loop')
@@ -40,6 +45,7 @@ class ControlLoop:
         return self.clock.clock_type == ClockType.ROS_TIME and self.clock.ros_time_is_active
 
     def _run(self) -> None:
+        self.priority_problem = raise_this_thread(self.realtime_priority)
         due_s = self.now_s()
         while not self._stopping:
             now = self.now_s()

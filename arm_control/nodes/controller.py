@@ -37,7 +37,7 @@ from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health
 from arm_control.control.sensing import SensorReading
-from arm_control.nodes import messages
+from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, LATCHED,
                                       loop_statistics, PLANNER_AVAILABLE, run, STATE_STREAM,
                                       status)
@@ -102,11 +102,17 @@ class ControllerNode(Node):
         self.create_timer(0.2, lambda: self.command(self.core.on_planner_available,
                                                     self.plans.ready()))
         self.create_timer(1.0, self.publish_diagnostics)
-        self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick)
+        priority = self.config.realtime_priority
+        self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority)
         self.publish_outputs()
+        # The threads there are now (executor, DDS, plan results) one step below the loop.
+        problem = realtime.raise_process(priority - 1)
         self.loop.start()
-        self.get_logger().info(f'controlling the arm at {self.config.loop_rate_hz:g} Hz; '
+        self.get_logger().info(f'controlling the arm at {self.config.loop_rate_hz:g} Hz'
+                               f'{f" at real-time priority {priority}" if priority else ""}; '
                                'waiting for joint_states')
+        if problem:
+            self.get_logger().warning(problem)
 
     def now_s(self) -> float:
         return self.loop.now_s()
@@ -124,10 +130,14 @@ class ControllerNode(Node):
     def on_joint_states(self, msg: JointState) -> None:
         position = messages.joint_pair(msg, 'position')
         velocity = messages.joint_pair(msg, 'velocity') or [math.nan, math.nan]
-        if position is None or not messages.within(position, MAX_ANGLE_RAD):
+        top_speed = self.core.sensing.max_leap_speed_rad_s       # beyond what motors give
+        if position is None or not messages.within(position, MAX_ANGLE_RAD) or \
+                not messages.within([v for v in velocity if not math.isnan(v)], top_speed):
             return self.warn_bad(f'ignored joint_states: expected finite positions of '
-                                 f'[shoulder, elbow] within two turns, got {len(msg.name)} '
-                                 f'names and {len(msg.position)} positions')
+                                 f'[shoulder, elbow] within two turns and velocities, if any, '
+                                 f'within {top_speed:.0f} rad/s; got {len(msg.name)} names, '
+                                 f'{len(msg.position)} positions, {len(msg.velocity)} '
+                                 'velocities')
         now = self.now_s()
 
         def fresh(latest, missing):
@@ -284,7 +294,10 @@ class ControllerNode(Node):
             'loop period worst (s)': f'{stats["worst"]:.4f}',
             'compute per cycle median (ms)': f'{1000 * stats["compute median"]:.3f}',
             'compute per cycle worst (ms)': f'{1000 * stats["compute worst"]:.3f}',
-            'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner)})
+            'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner),
+            'loop scheduling': self.loop.priority_problem or (
+                f'SCHED_FIFO {self.loop.realtime_priority}' if self.loop.realtime_priority
+                else 'normal')})
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()
         diagnostic.status = [status(self, LEVELS[level], message, values)]

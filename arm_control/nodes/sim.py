@@ -34,7 +34,7 @@ from std_srvs.srv import Trigger
 
 from arm_control.config import ArmConfig, JOINT_NAMES, SimConfig
 from arm_control.model.plant import ArmPlant
-from arm_control.nodes import messages
+from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, loop_statistics, run,
                                       STATE_STREAM, status)
 
@@ -90,9 +90,14 @@ class SimNode(Node):
         else:
             self.create_timer(self.period_s, self.step)
             self.create_timer(1.0, self.publish_diagnostics)
+        priority = self.config.realtime_priority
+        self.priority_problem = realtime.raise_process(priority)    # its DDS threads too
         self.get_logger().info(
             f'simulating the arm at {self.config.publish_rate_hz:g} Hz from '
-            f'[{self.config.initial_position[0]:.3f}, {self.config.initial_position[1]:.3f}] rad')
+            f'[{self.config.initial_position[0]:.3f}, {self.config.initial_position[1]:.3f}] rad'
+            f'{f" at real-time priority {priority}" if priority else ""}')
+        if self.priority_problem:
+            self.get_logger().warning(self.priority_problem)
 
     def now_s(self) -> float:
         if self.simulated_time:
