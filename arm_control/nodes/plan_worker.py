@@ -2,22 +2,28 @@
 
 Python runs one thread at a time in a process, so timing a plan -- milliseconds to tens of
 milliseconds of numpy and Python -- in the controller's process would hold its control loop
-back. The node starts one worker process at start-up (spawned, not forked: a fork would copy
-the DDS threads' locks) and hands it each plan; the loop never waits for it. The worker dies
-with the node: its end of the pipe closes when the node's process goes.
+back. The node starts one worker at start-up and hands it each plan; the loop never waits
+for it. The worker is ``python -m arm_control.nodes.plan_worker`` with pickled objects over
+its stdin and stdout: it imports only the timing code (multiprocessing's spawn would import
+the node's whole module again, rclpy and all, and a fork would copy the DDS threads' locks).
+It runs at normal priority, and dies with the node: its stdin closes when the node's
+process goes.
 """
 
-import multiprocessing
+from multiprocessing.connection import Connection
+import os
+import subprocess
+import sys
 import threading
 
 from arm_control.config import ArmConfig
 from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
 
 
-def _serve(arm, config, requests, results) -> None:
-    """The worker: time each (request, plan) that comes in, send back the TimedPlan."""
-    timer = PlanTimer(arm, config)
-    results.send(None)                          # ready
+def _serve(requests: Connection, results: Connection) -> None:
+    """The worker: (arm, config) first, then time each (request, plan) that comes in and
+    send back the TimedPlan; new (arm, config) when the settings change at run time."""
+    timer = None
     while True:
         try:
             item = requests.recv()
@@ -25,8 +31,11 @@ def _serve(arm, config, requests, results) -> None:
             return
         if item is None:
             return
-        if isinstance(item[0], ArmConfig):             # settings changed at run time
+        if isinstance(item[0], ArmConfig):
+            first = timer is None
             timer = PlanTimer(*item)
+            if first:
+                results.send(None)                      # ready
             continue
         request, plan = item
         try:
@@ -41,17 +50,17 @@ class PlanWorker:
     of its own when it is timed."""
 
     def __init__(self, arm, config, on_timed):
-        context = multiprocessing.get_context('spawn')
-        child_requests, self._requests = context.Pipe(duplex=False)      # (reader, writer)
-        self._results, child_results = context.Pipe(duplex=False)
-        self.process = context.Process(target=_serve, daemon=True, name='plan worker',
-                                       args=(arm, config, child_requests, child_results))
-        self.process.start()
-        child_requests.close()
-        child_results.close()
+        self.process = subprocess.Popen(
+            [sys.executable, '-m', 'arm_control.nodes.plan_worker'],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self._requests = Connection(os.dup(self.process.stdin.fileno()), readable=False)
+        self._results = Connection(os.dup(self.process.stdout.fileno()), writable=False)
+        self.process.stdin.close()
+        self.process.stdout.close()
         self.on_timed = on_timed
         self.ready = threading.Event()
         self._send_lock = threading.Lock()
+        self.retune(arm, config)
         self._thread = threading.Thread(target=self._receive, daemon=True, name='plan results')
         self._thread.start()
 
@@ -77,7 +86,7 @@ class PlanWorker:
 
     @property
     def alive(self) -> bool:
-        return self.process.is_alive()
+        return self.process.poll() is None
 
     def close(self) -> None:
         try:
@@ -85,6 +94,19 @@ class PlanWorker:
                 self._requests.send(None)
         except (OSError, ValueError):
             pass
-        self.process.join(1.0)
-        if self.process.is_alive():
+        try:
+            self.process.wait(1.0)
+        except subprocess.TimeoutExpired:
             self.process.terminate()
+
+
+def main() -> None:
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))    # whatever its parent had
+    requests = Connection(os.dup(0), writable=False)
+    results = Connection(os.dup(1), readable=False)
+    os.dup2(2, 1)                   # a stray print goes to the log, not into the results
+    _serve(requests, results)
+
+
+if __name__ == '__main__':
+    main()
