@@ -8,9 +8,10 @@ and each period's voltage is the first of two -- one per period ahead, per joint
 would put the reference exactly on the trajectory, position and velocity, two periods from
 now (four conditions, four volts: deadbeat; one Newton step from the Simpson average of the
 trajectory's voltage over each period, the Jacobian by finite differences). The PID tracks
-the reference, a motion the arm can follow exactly. The reference's motor controllers
-apply each held voltage as the robot's do (``PowerSupply.solve_many``: within the current
-limits and the bus it sags), so a command they lower moves the reference as it moves the arm.
+the reference, a motion the arm can follow exactly. The reference moves as the robot's
+motor controllers apply each held voltage (``PowerSupply.solve_many``: within the current
+limits and the bus it sags), so a command they lower moves the reference as it moves the
+arm; the Newton step itself is taken in the model alone.
 """
 
 import math
@@ -45,21 +46,21 @@ class PeriodFeedforward:
     def reset(self) -> None:
         self.state = None
 
-    def _simulate(self, x, volts, duration_s):
+    def _simulate(self, x, volts, duration_s, applied=True):
         """States (P, 4) after holding each of ``volts`` (P, k, 2) for ``duration_s`` in
-        turn, as the motor controllers apply them, by RK4 on steps of at most ``substep_s``
-        (``ArmDynamics.derivatives``)."""
+        turn, as the motor controllers apply them (``applied``; else as they are), by RK4
+        on steps of at most ``substep_s`` (``ArmDynamics.derivatives``)."""
         steps = max(1, math.ceil(duration_s / self.substep_s - 1e-9))
         h = duration_s / steps
         x = np.array(x, float)
 
         def f(state, command):
-            _, applied, _ = self.supply.solve_many(command, state[..., 2:])
-            return self.dynamics.derivatives(state, applied)
+            _, volts_applied, _ = self.supply.solve_many(command, state[..., 2:])
+            return self.dynamics.derivatives(state, volts_applied)
 
         for k in range(volts.shape[1]):
             for _ in range(steps):
-                x = rk4_batch(f, x, volts[:, k], h)
+                x = rk4_batch(f if applied else self.dynamics.derivatives, x, volts[:, k], h)
         return x
 
     def step(self, now_s: float, setpoint, bus_voltage: float | None = None) -> np.ndarray:
@@ -87,7 +88,11 @@ class PeriodFeedforward:
         delta = 0.5
         trials = np.tile(guess, (5, 1))
         trials[1:] += delta * np.eye(4)
-        ends = self._simulate(np.tile(self.state, (5, 1)), trials.reshape(5, 2, 2), period)
+        # The Newton step in the model alone: where the motor controllers would lower a
+        # command, its column of the Jacobian vanishes and the other joint's volts would be
+        # bent to make up for it through the coupling.
+        ends = self._simulate(np.tile(self.state, (5, 1)), trials.reshape(5, 2, 2), period,
+                              applied=False)
         jacobian = (ends[1:] - ends[0]).T / delta
         try:
             guess = guess - np.linalg.solve(jacobian, ends[0] - target)
