@@ -226,9 +226,9 @@ def _follow(points, velocity, dynamics, forbidden, limits, step_rad, reshape=Fal
     if reshape and speed == 0.0 and ignore_until < 0.0 and np.all(radii > 0.0) \
             and hasattr(forbidden, 'arm'):
         # From rest along one piece: bend the whole path where that is faster.
-        shape = free_shape(points, radii, best_shape(points, radii, dynamics, forbidden,
-                                                     limits), forbidden, step_rad)
-        return [_timed_piece(points, radii, dynamics, limits, 0.0, shape=shape)]
+        shape, bus = best_shape(points, radii, dynamics, forbidden, limits)
+        shape = free_shape(points, radii, shape, forbidden, step_rad)
+        return [_timed_piece(points, radii, dynamics, limits, 0.0, shape=shape, bus_hint=bus)]
     pieces = []
     for i, (piece_points, piece_radii) in enumerate(split_at_stops(points, radii)):
         first_piece = i == 0

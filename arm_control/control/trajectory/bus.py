@@ -18,7 +18,7 @@ from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
 BUS_ITERATIONS = 10
 # The bus is found on this many stages first, then only raised where it falls short, in at
 # most this many timings on the fine grid.
-COARSE_STAGES = 48
+COARSE_STAGES = 32
 FINE_BUS_ITERATIONS = 4
 # Volts a grid point's voltage may pass its own bus by in the iteration (the final check on
 # dense samples has the last word).

@@ -36,15 +36,12 @@ def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
     """
     sign = np.where(A >= 0.0, 1.0, -1.0)
     size = np.abs(A)
-    top = np.array(top, float)
-    for j in range(len(W)):
-        for m in range(len(W)):
-            if j != m:
-                left, right = sign[..., j] * size[..., m], sign[..., m] * size[..., j]
-                top = np.minimum(top, first_positive_root(
-                    left * B[..., j] - right * B[..., m], left * D[..., j] - right * D[..., m],
-                    W[j] * size[..., m] + W[m] * size[..., j] + left * C[..., j]
-                    - right * C[..., m]))
+    j, m = np.nonzero(~np.eye(len(W), dtype=bool))             # every ordered pair of rows
+    left, right = sign[..., j] * size[..., m], sign[..., m] * size[..., j]
+    top = np.minimum(top, np.min(first_positive_root(
+        left * B[..., j] - right * B[..., m], left * D[..., j] - right * D[..., m],
+        W[j] * size[..., m] + W[m] * size[..., j] + left * C[..., j] - right * C[..., m]),
+        axis=-1))
     count, stages = A.shape[0], A.shape[1]
     twice = 2.0 * np.asarray(steps, float)                        # 2Δ per stage
     # Stage-major copies (n, K, rows): each step below reads contiguous memory.
@@ -65,11 +62,17 @@ def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
         end_beta_squared = end_beta ** 2
         end_gamma = stage * (W - sign[1:] * C[1:])
         if count == 1:      # one path: plain floats are several times faster than numpy
-            speed, ceiling = _passes_one_path(
-                [v[:, 0].tolist() for v in (B, C, D, sign, size, inverse, unbounded)],
-                [v[:, 0].tolist() for v in (start_alpha, start_beta, start_gamma, end_alpha,
-                                            end_beta, end_gamma)],
-                top[:, 0].tolist(), twice.tolist(), W.tolist(), float(start_speed))
+            slope_x = -sign * B * inverse         # the s̈ bound: slope_x·x + slope_y·y + ...
+            slope_y = -sign * D * inverse
+            brake = np.where(size > 1e-12, -(W + sign * C) * inverse, -np.inf)
+            push = np.where(size > 1e-12, (W - sign * C) * inverse, np.inf)
+            backward = np.stack([slope_x[1:], slope_y[1:], brake[1:], start_alpha, start_beta,
+                                 start_gamma, size[:-1]], axis=-1)[:, 0]
+            forward = np.stack([slope_x[:-1], slope_y[:-1], push[:-1], end_alpha, end_beta,
+                                end_gamma, size[1:]], axis=-1)[:, 0]
+            speed, ceiling = _passes_one_path(backward.tolist(), forward.tolist(),
+                                              top[:, 0].tolist(), twice.tolist(),
+                                              float(start_speed))
             return np.where(start_speed > ceiling[0] * (1.0 + 1e-9) + 1e-12, np.nan,
                             np.array(speed))[None]
         ceiling = np.zeros((stages, count))
@@ -103,35 +106,32 @@ def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
     return speed
 
 
-def _passes_one_path(rows, stage_rows, top, twice, W, start_speed):
-    """``_fastest_speeds``'s backward and forward passes for one path, on floats."""
-    B, C, D, sign, size, inverse, unbounded = rows
-    start_alpha, start_beta, start_gamma, end_alpha, end_beta, end_gamma = stage_rows
+def _passes_one_path(backward, forward, top, twice, start_speed):
+    """``fastest_speeds``' backward and forward passes for one path, on floats. Per stage and
+    row: the s̈ bound's slopes in x and y and its constant (braking at the stage's end for
+    the backward pass, driving at its start for the forward one), then α, β, γ and |A| of
+    the quadratic that bounds the speed at the stage's other end."""
     stages = len(top)
-    kinds = range(len(W))
     sqrt, inf = math.sqrt, math.inf
-
-    def first_root(alpha, beta, gamma):
-        discriminant = beta * beta - 4.0 * alpha * gamma
-        if discriminant < 0.0:
-            return inf
-        denominator = sqrt(discriminant) - beta
-        return 2.0 * gamma / denominator if denominator > 0.0 else inf
-
     ceiling = [0.0] * stages
     for i in range(stages - 2, -1, -1):
         y = ceiling[i + 1]
         x = y * y
         bound = top[i]
         brake = -inf
-        after, here = i + 1, i
-        for j in kinds:
-            if not unbounded[after][j]:
-                r = (B[after][j] * y + D[after][j]) * y + C[after][j]
-                brake = max(brake, -(W[j] + sign[after][j] * r) * inverse[after][j])
-            bound = min(bound, first_root(start_alpha[here][j], start_beta[here][j],
-                                          start_gamma[here][j] + size[here][j] * x))
-        ceiling[i] = min(bound, sqrt(max(x - twice[i] * brake, 0.0)))
+        for slope_x, slope_y, constant, alpha, beta, gamma, size in backward[i]:
+            value = slope_x * x + slope_y * y + constant
+            if value > brake:
+                brake = value
+            gamma += size * x
+            discriminant = beta * beta - 4.0 * alpha * gamma
+            if discriminant >= 0.0:
+                denominator = sqrt(discriminant) - beta
+                if denominator > 0.0 and 2.0 * gamma < bound * denominator:
+                    bound = 2.0 * gamma / denominator
+        slowest = x - twice[i] * brake
+        slowest = sqrt(slowest) if slowest > 0.0 else 0.0
+        ceiling[i] = bound if bound < slowest else slowest
     speed = [0.0] * stages
     speed[0] = start_speed
     for i in range(stages - 1):
@@ -139,14 +139,22 @@ def _passes_one_path(rows, stage_rows, top, twice, W, start_speed):
         x = y * y
         push = inf
         reach = ceiling[i + 1]
-        for j in kinds:
-            if not unbounded[i][j]:
-                r = (B[i][j] * y + D[i][j]) * y + C[i][j]
-                push = min(push, (W[j] - sign[i][j] * r) * inverse[i][j])
-            reach = min(reach, first_root(end_alpha[i][j], end_beta[i][j],
-                                          end_gamma[i][j] + size[i + 1][j] * x))
-        speed[i + 1] = min(sqrt(max(min(x + twice[i] * push, ceiling[i + 1] ** 2), 0.0)),
-                           reach)
+        for slope_x, slope_y, constant, alpha, beta, gamma, size in forward[i]:
+            value = slope_x * x + slope_y * y + constant
+            if value < push:
+                push = value
+            gamma += size * x
+            discriminant = beta * beta - 4.0 * alpha * gamma
+            if discriminant >= 0.0:
+                denominator = sqrt(discriminant) - beta
+                if denominator > 0.0 and 2.0 * gamma < reach * denominator:
+                    reach = 2.0 * gamma / denominator
+        fastest = x + twice[i] * push
+        top_next = ceiling[i + 1] * ceiling[i + 1]
+        if fastest > top_next:
+            fastest = top_next
+        fastest = sqrt(fastest) if fastest > 0.0 else 0.0
+        speed[i + 1] = fastest if fastest < reach else reach
     return speed, ceiling
 
 

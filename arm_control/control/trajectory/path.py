@@ -21,7 +21,7 @@ _MAX_BLEND_HALVINGS = 6
 # Timing grids: about one stage per this much path length (rad), within [least, most] stages;
 # TOPP-RA (moving starts) on the coarser one, the exact timing from rest on the finer.
 COARSE_GRID = (0.01, 40, 240)
-FINE_GRID = (0.005, 80, 400)
+FINE_GRID = (0.0075, 60, 260)
 
 
 def _ramp(t, r, order):

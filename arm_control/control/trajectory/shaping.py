@@ -50,7 +50,8 @@ def _with_room(arm: ArmConfig) -> ForbiddenSpace:
 
 
 def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: TrajectoryLimits):
-    """Amplitudes (H, 2) of the bend Σₕ aₕ·sin(hπσ/L) that make the path fastest, or zeros.
+    """(amplitudes (H, 2) of the bend Σₕ aₕ·sin(hπσ/L) that make the path fastest, or
+    zeros; the (σ, sag, current cap) of the unbent path's bus, or None).
 
     A grid of the first harmonic's amplitudes, then ``_STEPS`` refinements over every
     combination of ±step; each batch timed at once.
@@ -75,10 +76,11 @@ def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: Trajecto
 
     x, sag, cap = under_the_bus(unshaped, PathTerms(dynamics, q0, dq0, ddq0), limits, grid)
     if x is None:
-        return zeros
+        return zeros, None
+    bus = None if limits.supply is None else (grid, sag, cap)
     unshaped_s = float(durations(steps, np.sqrt(x)[None])[0])
     if not unshaped_s >= _MIN_DURATION_S:
-        return zeros                               # a hop: the search would cost more
+        return zeros, bus                          # a hop: the search would cost more
     roomy = _with_room(forbidden.arm)
     base_roomy = np.asarray(roomy.is_free(q0), dtype=bool)
 
@@ -115,8 +117,8 @@ def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: Trajecto
         if np.min(times) < best_s:
             best, best_s = batch[int(np.argmin(times))], float(np.min(times))
     if not math.isfinite(best_s) or best_s >= unshaped_s * (1.0 - _MIN_GAIN):
-        return zeros
-    return best
+        return zeros, bus
+    return best, bus
 
 
 def free_shape(points, radii, shape, forbidden, step_rad):
