@@ -32,8 +32,6 @@ toppra.setup_logging('CRITICAL')   # failures are reported here, not by toppra's
 _SPEED_FLOOR = 1e-3
 _NEWTON_ITERATIONS = 8
 _NEWTON_TOLERANCE = 0.003          # relative change of the profile's duration
-# Without a speed cap, x = ṡ² is still bounded here (toppra needs a finite bound).
-_X_BOUND = 1e4
 
 
 class _RowsConstraint(toppra.constraint.LinearConstraint):
@@ -77,7 +75,7 @@ def time_moving(path: BlendedPath, grid, terms: PathTerms, limits: TrajectoryLim
     Returns (x on the grid, controllable start x) or (None, controllable start x) when the
     start speed is out of reach. x is the squared path speed ṡ².
     """
-    x_bound = np.minimum(speed_caps(limits, terms.dq) ** 2, _X_BOUND)
+    x_bound = speed_caps(limits, terms.dq) ** 2            # inf where nothing caps it
     start_x = start_speed ** 2
     if limits.supply is None:
         bus = BusSag(terms, limits, grid)
