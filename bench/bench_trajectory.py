@@ -65,7 +65,7 @@ import numpy as np  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.trajectory import (time_optimal_trajectory,  # noqa: E402
-                                            TrajectoryLimits)
+                                            TrajectoryError, TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics  # noqa: E402
 from arm_control.model.electrical import PowerSupply  # noqa: E402
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError  # noqa: E402
@@ -281,8 +281,12 @@ def column_preempted(move: Move) -> dict:
     half = 0.5 * move.trajectory.duration_s
     q, qd, _ = move.trajectory.sample(half)
     waypoints = _joint_path(move, q, move.start_xy)
-    trajectory, cpu_ms, wall_ms = timed(lambda: time_optimal_trajectory(
-        waypoints, move.dynamics, move.forbidden, move.limits, start_velocity_rad_s=qd))
+    try:
+        trajectory, cpu_ms, wall_ms = timed(lambda: time_optimal_trajectory(
+            waypoints, move.dynamics, move.forbidden, move.limits, start_velocity_rad_s=qd))
+    except TrajectoryError as error:
+        return {'preempt |q̇| rad/s': f'{np.linalg.norm(qd):.2f}', 'preempt s': 'none',
+                'preempt ms cpu/wall': str(error)}
     cells = _electrical_cells(move.arm, trajectory, 'preempt ')
     return {'preempt |q̇| rad/s': f'{np.linalg.norm(qd):.2f}',
             'preempt s': f'{trajectory.duration_s:.3f}',
@@ -335,13 +339,18 @@ def what_if(count=None):
         row = {'move': move.name}
         for limit in WHAT_IF_LIMITS_A:
             arm = with_current_limit(base, limit)
-            trajectory = time_optimal_trajectory(
-                move.waypoints, ArmDynamics(arm), move.forbidden,
-                TrajectoryLimits.from_config(arm, controller))
+            label = f'{limit:.0f} A' if math.isfinite(limit) else 'none'
+            try:
+                trajectory = time_optimal_trajectory(
+                    move.waypoints, ArmDynamics(arm), move.forbidden,
+                    TrajectoryLimits.from_config(arm, controller))
+            except TrajectoryError:
+                # No minimum either: the same arm cannot hold itself along the path.
+                row[f'{label}: traj s / min s'] = 'cannot hold'
+                continue
             times, _ = ocp.refined_minimum(arm, move.start_q, move.waypoints[-1],
                                            ocp.guess_from(trajectory, arm), knots=(50, 100))
             e = electrical(arm, trajectory)
-            label = f'{limit:.0f} A' if math.isfinite(limit) else 'none'
             row[f'{label}: traj s / min s'] = f'{trajectory.duration_s:.3f} / {times[-1]:.3f}'
             row[f'{label}: ratio'] = f'{trajectory.duration_s / times[-1]:.3f}'
             row[f'{label}: bus V / A'] = (f'{e["min_bus_v"]:.1f} / {e["peak_a"]:.0f}'

@@ -2,10 +2,11 @@
 
 The bus sags under the trajectory's own draw (``PowerSupply.bus_voltages``), and the volts
 each joint may use sag with it. A path is timed with a sag per grid point, the bus computed
-along the result, and the sag corrected (a secant step per point toward the sag the timing
-itself causes) until every grid point's voltage fits its own bus less the reserves. Where
-the bus would fall below the brownout voltage (plus a margin), the motors' currents are held
-to what keeps it there (``TrajectoryLimits.floor_current_a``) and the bus taken at that floor.
+along the result, and the sag corrected (``BusSag``) until every grid point's voltage fits
+its own bus less the reserves: on a coarse grid first (``bus_profile``), then on the fine
+one. Whatever the sag, the rows keep the motors' currents where the bus cannot fall below
+the brownout voltage (plus a margin) while the voltages stay within it
+(``TrajectoryLimits.lowest_bus_v``), so a timing at that lowest bus always fits (``safe``).
 """
 
 import numpy as np
@@ -15,14 +16,16 @@ from arm_control.control.trajectory.limits import TrajectoryLimits, window
 from arm_control.control.trajectory.path import clustered
 from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
 
-BUS_ITERATIONS = 10
+BUS_ITERATIONS = 16
 # The bus is found on this many stages first, then only raised where it falls short, in at
-# most this many timings on the fine grid.
+# most this many timings on the fine grid (twice, the second time from more sag).
 COARSE_STAGES = 32
-FINE_BUS_ITERATIONS = 4
+FINE_BUS_ITERATIONS = 6
 # Volts a grid point's voltage may pass its own bus by in the iteration (the final check on
 # dense samples has the last word).
 BUS_TOLERANCE_V = 0.02
+# ... and by this much in the last timing, before the iteration gives up on it.
+NEAR_MISS_V = 0.2
 # How far a safe sag moves toward the one its timing would fit exactly (the volts follow the
 # bus, but so does the timing: a full step would overshoot).
 RELAX = 0.5
@@ -84,54 +87,56 @@ class BusSag:
     """The sag per grid point that one path's timing assumes, corrected toward its own.
 
     Each timing is judged per grid point: does its voltage fit the bus it leaves, less the
-    reserves? The next sag is the one at which the joints at their voltage's edge would
-    fit their own bus exactly, at the timing's speeds (``bus_at_the_edge``: a Newton-like
-    step, since the volts follow the bus there); where the bus would fall below the floor,
-    every motor's current is held to ``floor_current_a`` from then on and the bus taken at
-    the floor. The fastest timing that fits everywhere is kept.
+    reserves? Where it does not, the sag is raised to the one at which the joints at their
+    voltage's edge would fit their own bus exactly, at the timing's speeds
+    (``bus_at_the_edge``: a Newton-like step, since the volts follow the bus there); where
+    the bus would fall below the floor (the volts went past it), halfway down to the lowest
+    bus the rows allow. Where it fits with the voltage at its
+    edge, the sag is relaxed by ``relax`` of the way toward that same bus, never below
+    halfway to a sag found unsafe there before. The fastest timing that fits everywhere is
+    kept.
     """
 
     def __init__(self, terms: PathTerms, limits: TrajectoryLimits, grid, sag_v=None,
-                 current_cap_a=None, relax=RELAX):
+                 relax=RELAX):
         self.terms, self.limits, self.relax = terms, limits, relax
         self.steps = np.diff(grid)
         self.sag = np.zeros(len(grid)) if sag_v is None else np.array(sag_v, float)
-        self.current_cap_a = None if current_cap_a is None else np.array(current_cap_a, float)
         self.unsafe = np.full(len(grid), np.nan)    # the most sag found unsafe, per point
-        self.best = None                   # (duration, x, sag, cap) of the fastest that fits
+        self.worst_excess_v = np.inf                # of the last timing judged
+        self.best = None                   # (duration, x, sag) of the fastest that fits
 
     @property
     def stiff(self) -> bool:
         return self.limits.supply is None
 
     def settle(self, x) -> bool:
-        """Judge the timing x made with ``sag`` and ``current_cap_a``; True when it fits
-        and the sag stays, else set them for the next timing."""
+        """Judge the timing x made with ``sag``; True when it fits and the sag stays, else
+        set it for the next timing."""
         if self.stiff:
-            self.best = (None, x, self.sag, None)
+            self.best = (None, x, self.sag)
             return True
         limits, sag = self.limits, self.sag
         volts = stage_voltages(self.terms, x, self.steps)
         bus = bus_along(self.terms, limits, volts, x)
         browned = ~(bus >= limits.bus_floor_v)                 # NaN too
-        fits = ~browned & (excess_over_bus(self.terms, limits, volts,
-                                           np.nan_to_num(bus)) <= BUS_TOLERANCE_V)
-        cap = None if self.current_cap_a is None else self.current_cap_a.copy()
+        excess = excess_over_bus(self.terms, limits, volts, np.nan_to_num(bus))
+        excess = np.where(browned, np.inf, excess)
+        fits = excess <= BUS_TOLERANCE_V
+        self.worst_excess_v = float(np.max(excess))
         if np.all(fits):
             duration = float(np.sum(2.0 * self.steps / np.maximum(
                 np.sqrt(x[1:]) + np.sqrt(x[:-1]), 1e-12)))
             if self.best is None or duration < self.best[0]:
-                self.best = (duration, x, sag.copy(), cap)
+                self.best = (duration, x, sag.copy())
         target = bus_at_the_edge(self.terms, limits, volts, x, sag)
         falls = browned | ~(target >= limits.bus_floor_v)
-        if np.any(falls):
-            if self.current_cap_a is None:
-                self.current_cap_a = np.full(len(sag), np.inf)
-            self.current_cap_a[falls] = limits.floor_current_a()
-        # Above its nominal voltage (regenerating) the bus gives nothing more: the commands
-        # stop at the nominal voltage.
-        needed = np.maximum(limits.nominal_voltage - np.where(falls, limits.bus_floor_v,
-                                                              target), 0.0)
+        # Where it would brown out, the volts there went past the bus: halfway down to the
+        # lowest bus at once. Above its nominal voltage
+        # (regenerating) the bus gives nothing more: the commands stop at the nominal voltage.
+        halfway = 0.5 * (sag + limits.nominal_voltage - limits.lowest_bus_v())
+        needed = np.maximum(np.where(falls, np.maximum(sag, halfway),
+                                     limits.nominal_voltage - target), 0.0)
         binding = excess_over_bus(self.terms, limits, volts,
                                   limits.nominal_voltage - sag) > -BUS_TOLERANCE_V
         # Never relax to a sag a timing was already found unsafe at: halfway to it at most.
@@ -144,35 +149,43 @@ class BusSag:
 
 
 def under_the_bus(solve, terms: PathTerms, limits: TrajectoryLimits, grid, sag_v=None,
-                  current_cap_a=None, iterations=BUS_ITERATIONS, relax=RELAX):
-    """The fastest x = ṡ² from ``solve(sag_v, current_cap_a)`` (None: no timing) that fits
-    the bus it leaves (``BusSag``, starting from ``sag_v`` and ``current_cap_a``), after at
-    most ``iterations`` timings, with the sag and the current caps it was timed with; else
-    the last timing (the final check has the last word), or None when ``solve`` finds
-    none."""
-    follower = BusSag(terms, limits, grid, sag_v, current_cap_a, relax)
-    sag, cap = follower.sag, follower.current_cap_a
-    for _ in range(1 if follower.stiff else iterations):
+                  iterations=None, relax=RELAX, give_up=False):
+    """The fastest x = ṡ² from ``solve(sag_v)`` (None: no timing) that fits the bus it
+    leaves (``BusSag``, starting from ``sag_v``), after at most ``iterations`` timings, with
+    the sag it was timed with. When none fits, the last timing if it misses by no more than
+    ``NEAR_MISS_V`` (the final check tightens it), else None with ``give_up``, else the safe
+    one (``safe``); None when ``solve`` finds none."""
+    follower = BusSag(terms, limits, grid, sag_v, relax)
+    for _ in range(1 if follower.stiff else iterations or BUS_ITERATIONS):
         sag = follower.sag
-        cap = None if follower.current_cap_a is None else follower.current_cap_a.copy()
-        x = solve(sag, cap)
+        x = solve(sag)
         if x is None or follower.settle(x):
             break
-    if follower.best is None:
-        return x, sag, cap
-    _, x, sag, cap = follower.best
-    return x, sag, cap
+    if follower.best is not None:
+        _, x, sag = follower.best
+        return x, sag
+    if x is None or follower.worst_excess_v <= NEAR_MISS_V:
+        return x, sag
+    if give_up:
+        return None, sag
+    sag = safe(limits, len(grid))
+    return solve(sag), sag
+
+
+def safe(limits: TrajectoryLimits, count: int):
+    """A sag at which any timing within the rows fits its bus: down to the lowest bus."""
+    return np.full(count, limits.nominal_voltage - limits.lowest_bus_v())
 
 
 def exact_timing(terms: PathTerms, grid, limits: TrajectoryLimits, margin_v: float = 0.0,
                  start_speed: float = 0.0):
-    """solve(sag_v, current_cap_a) -> x = ṡ² of the exact timing (``exact``) on this grid
-    from ``start_speed`` to rest, or None when there is none."""
+    """solve(sag_v) -> x = ṡ² of the exact timing (``exact``) on this grid from
+    ``start_speed`` to rest, or None when there is none."""
     steps = np.diff(grid)
     top = speed_caps(limits, terms.dq)[None]
 
-    def solve(sag_v, current_cap_a):
-        A, B, C, D, W = rows(terms, limits, sag_v, current_cap_a, margin_v)
+    def solve(sag_v):
+        A, B, C, D, W = rows(terms, limits, sag_v, margin_v)
         speed = fastest_speeds(A[None], B[None], C[None], D[None], W, top, steps,
                                start_speed)[0]
         if not np.all(np.isfinite(speed)) or np.any(speed[1:] + speed[:-1] <= 0.0):
@@ -182,26 +195,16 @@ def exact_timing(terms: PathTerms, grid, limits: TrajectoryLimits, margin_v: flo
     return solve
 
 
-def on_grid(grid, sigma, values):
-    """A profile over σ on another grid, inf staying inf (None stays None)."""
-    if values is None:
-        return None
-    finite = np.isfinite(values)
-    out = np.interp(grid, sigma, np.where(finite, values, 0.0))
-    return np.where(np.interp(grid, sigma, (~finite).astype(float)) > 0.0, np.inf, out)
-
-
 def bus_profile(path, dynamics, limits: TrajectoryLimits, margin_v=0.0, start_speed=0.0,
                 hint=None):
-    """(σ, sag, current cap) of the path's exact timing under its own bus, found on a coarse
-    grid (``COARSE_STAGES``) from ``hint`` (a like path's (σ, sag, current cap)); zero sag
-    when the start speed is out of its reach."""
+    """(σ, sag) of the path's exact timing under its own bus, found on a coarse grid
+    (``COARSE_STAGES``) from ``hint`` (a like path's (σ, sag)); zero sag when the start
+    speed is out of its reach."""
     sigma = clustered(path.length, COARSE_STAGES)
     terms = PathTerms.along(dynamics, path, sigma)
-    start = (None, None) if hint is None else (np.interp(sigma, hint[0], hint[1]),
-                                               on_grid(sigma, hint[0], hint[2]))
-    x, sag, cap = under_the_bus(exact_timing(terms, sigma, limits, margin_v, start_speed),
-                                terms, limits, sigma, *start)
+    start = None if hint is None else np.interp(sigma, *hint)
+    x, sag = under_the_bus(exact_timing(terms, sigma, limits, margin_v, start_speed),
+                           terms, limits, sigma, start)
     if x is None:
-        return sigma, np.zeros(len(sigma)), None
-    return sigma, sag, cap
+        return sigma, np.zeros(len(sigma))
+    return sigma, sag

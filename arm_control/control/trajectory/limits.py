@@ -7,8 +7,9 @@ driving reserve, and against it (braking) up to the bus less the feedback reserv
 ahead of its setpoint needs more braking than planned, while an arm behind catches up by
 braking less. The current limit is a window of I_limit·R volts either side of the back-EMF,
 |V − e·q̇| ≤ I_limit·R, kept back by the same reserves. The bus sags under the trajectory's
-own draw (``model.electrical``); where it would fall below the brownout voltage (plus a
-margin), the currents are held to what keeps it there.
+own draw (``model.electrical``); where the current limits alone would let it fall below
+the brownout voltage (plus a margin), the motors' currents together are held to what keeps it
+there.
 """
 
 from dataclasses import dataclass
@@ -72,15 +73,23 @@ class TrajectoryLimits:
             return -math.inf
         return self.supply.brownout_voltage + BROWNOUT_MARGIN_V
 
-    def floor_current_a(self) -> float:
-        """A current per motor that keeps the bus above ``bus_floor_v`` whatever the volts:
-        with |V| ≤ V_bus each motor draws at most its stator current from the battery, so
-        Σ n·|I| ≤ (V_nominal − floor)/R_battery is enough."""
+    def supply_current_a(self) -> float:
+        """Σ n·|I| over every motor that keeps the bus above ``bus_floor_v`` whatever the
+        volts, or inf when the current limits already do: with |V| ≤ V_bus each motor draws
+        at most its stator current from the battery, so V_bus ≥ V_nominal − R_battery·Σ n·|I|.
+        """
         supply = self.supply
-        if supply is None or supply.resistance_ohm == 0.0:
+        if supply is None or supply.resistance_ohm == 0.0 \
+                or supply.min_bus_voltage() >= self.bus_floor_v:
             return math.inf
-        total = (supply.nominal_voltage - self.bus_floor_v) / supply.resistance_ohm
-        return total / sum(supply.counts)
+        return (supply.nominal_voltage - self.bus_floor_v) / supply.resistance_ohm
+
+    def lowest_bus_v(self) -> float:
+        """The lowest bus a timing within every row can leave (its voltages within it)."""
+        if self.supply is None:
+            return self.nominal_voltage
+        lowest = self.supply.min_bus_voltage()
+        return lowest if lowest >= self.bus_floor_v else self.bus_floor_v
 
     @classmethod
     def from_config(cls, arm: ArmConfig, controller: ControllerConfig) -> 'TrajectoryLimits':

@@ -20,7 +20,7 @@ import toppra
 import toppra.algorithm
 import toppra.constraint
 
-from arm_control.control.trajectory.bus import bus_profile, BusSag, on_grid
+from arm_control.control.trajectory.bus import bus_profile, BusSag, safe
 from arm_control.control.trajectory.limits import TrajectoryLimits
 from arm_control.control.trajectory.path import BlendedPath
 from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
@@ -80,20 +80,18 @@ def time_moving(path: BlendedPath, grid, terms: PathTerms, limits: TrajectoryLim
     if limits.supply is None:
         bus = BusSag(terms, limits, grid)
     else:
-        sigma, sag, cap = bus_profile(path, terms.dynamics, limits, margin_v, start_speed,
-                                      bus_hint)
-        bus = BusSag(terms, limits, grid, np.interp(grid, sigma, sag),
-                     on_grid(grid, sigma, cap), relax=0.0)
+        sigma, sag = bus_profile(path, terms.dynamics, limits, margin_v, start_speed, bus_hint)
+        bus = BusSag(terms, limits, grid, np.interp(grid, sigma, sag), relax=0.0)
     if start_x > x_bound[0]:
         # Moving faster than the caps allow already: let it slow down into them, at half
         # the hardest braking the start allows.
-        A, B, C, D, W = rows(terms, limits, 0.0, None, margin_v)
+        A, B, C, D, W = rows(terms, limits, 0.0, margin_v)
         braking = _hardest_braking(A[0], B[0], C[0], D[0], W, start_x)
         slowing = 0.5 * (-braking if braking < 0.0 else 0.0)
         x_bound = np.maximum(x_bound, start_x * 1.001 - 2.0 * slowing * grid)
     if guess is None:
         # Start from the speed at which back-EMF alone would use the whole budget.
-        A, B, C, D, W = rows(terms, limits, 0.0, None, margin_v)
+        A, B, C, D, W = rows(terms, limits, 0.0, margin_v)
         headroom = np.maximum(W - np.abs(C), 0.05 * W)
         emf_cap = np.min(headroom / np.maximum(np.abs(D), 1e-9), axis=1)
         guess = np.minimum(x_bound, emf_cap ** 2)
@@ -102,8 +100,7 @@ def time_moving(path: BlendedPath, grid, terms: PathTerms, limits: TrajectoryLim
     reachable_start = math.inf
     for iteration in range(_NEWTON_ITERATIONS + 4):
         root = np.sqrt(np.maximum(x_prev, _SPEED_FLOOR ** 2))
-        A, B, C, D, W = rows(terms, limits, bus.sag, bus.current_cap_a, margin_v,
-                             coulomb_speed=root)
+        A, B, C, D, W = rows(terms, limits, bus.sag, margin_v, coulomb_speed=root)
         constraint = _RowsConstraint(A, B + D / (2 * root[:, None]),
                                      C + D * root[:, None] / 2, W, x_bound)
         solver = toppra.algorithm.TOPPRA([constraint], path, gridpoints=grid,
@@ -151,13 +148,8 @@ def stopping_distance(start, direction, speed, dynamics: ArmDynamics,
     stages = int(min(150, max(20, math.ceil(longest_rad / 0.01))))
     grid = np.linspace(0.0, longest_rad, stages + 1)
     terms = PathTerms.along(dynamics, path, grid)
-    sag, cap = 0.0, None
-    if limits.supply is not None:
-        lowest = limits.supply.min_bus_voltage()
-        lowest = lowest if math.isfinite(lowest) else limits.bus_floor_v
-        sag = limits.nominal_voltage - max(lowest, limits.bus_floor_v)
-        cap = np.full(len(grid), limits.floor_current_a())
-    A, B, C, D, W = rows(terms, limits, sag, cap)
+    sag = 0.0 if limits.supply is None else safe(limits, len(grid))
+    A, B, C, D, W = rows(terms, limits, sag)
     x = speed ** 2
     for i, delta in enumerate(np.diff(grid)):
         lowest = _hardest_braking(A[i], B[i], C[i], D[i], W, x)

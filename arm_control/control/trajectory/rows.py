@@ -12,6 +12,8 @@ per rad/s) and each motor's current I = T/R. The rows, each A·u + B·x + C + D�
 - voltage: V within the (driving, braking) window of the bus less the reserves (W = 1);
 - current: T within the window of I_limit·R less the reserves (W = 1; no row without a
   limit);
+- supply: Σ n·|I| = |n_a·T_a/R_a ± n_b·T_b/R_b| within what keeps the bus above the floor
+  (``TrajectoryLimits.supply_current_a``; no rows when the current limits already do);
 - acceleration: q̈ within its cap (W = the cap; no row when the cap is inf).
 
 Coulomb friction enters as c·sign(q'), its value at speed, or as its tanh at given speeds.
@@ -63,43 +65,41 @@ class PathTerms:
         return self.torque_volts(u, x) + self.emf * np.sqrt(np.maximum(x, 0.0))[..., None]
 
 
-def rows(terms: PathTerms, limits: TrajectoryLimits, sag_v=0.0, current_cap_a=None,
-         margin_v=0.0, coulomb_speed=None):
+def rows(terms: PathTerms, limits: TrajectoryLimits, sag_v=0.0, margin_v=0.0,
+         coulomb_speed=None):
     """The rows (A, B, C, D of shape (..., n, rows); W (rows,)) of every limit at once.
 
     ``sag_v`` (scalar or (..., n)): how far the bus sits below its nominal voltage;
-    ``current_cap_a`` ((..., n) or None): a current per motor the bus needs kept to;
     ``margin_v``: volts kept back from every voltage and current window besides the
     reserves (the final check's tightening); ``coulomb_speed``: the speeds at which
     Coulomb friction is taken (None: at speed, c·sign(q')).
     """
     dq, ddq = terms.dq, terms.ddq
     friction = terms.coulomb(coulomb_speed)
+    torque = (terms.a, terms.b, terms.c + friction, terms.d)     # T's u, x, 1 and y terms
     driving, braking = limits.budget
     sag = np.asarray(sag_v, float)[..., None] + margin_v
     centre, half = window(dq, driving - sag, braking - sag)
     half = np.maximum(half, _LEAST_HALF_WIDTH_V)
     A, B = [terms.a / half], [terms.b / half]
-    C, D = [(terms.c + friction - centre) / half], [(terms.d + terms.emf) / half]
+    C, D = [(torque[2] - centre) / half], [(terms.d + terms.emf) / half]
     W = [1.0, 1.0]
-    reserves = limits.reserves_v
     for j, (drive, brake) in enumerate(limits.current_budget_v):
-        if not np.isfinite(drive) and current_cap_a is None:
-            continue
-        if current_cap_a is not None:
-            cap = np.asarray(current_cap_a, float) * limits.supply.motors[j].resistance_ohm
-            drive = np.minimum(drive, cap - reserves[0])
-            brake = np.minimum(brake, cap - reserves[1])
-        if not np.all(np.isfinite(drive)):
-            drive, brake = (np.where(np.isfinite(v), v, 1e9) for v in (drive, brake))
-        centre_j, half_j = window(dq[..., j], drive - margin_v, brake - margin_v)
-        half_j = np.maximum(half_j, _LEAST_HALF_WIDTH_V)[..., None]
-        centre_j = centre_j[..., None]
-        A.append(terms.a[..., j:j + 1] / half_j)
-        B.append(terms.b[..., j:j + 1] / half_j)
-        C.append((terms.c[..., j:j + 1] + friction[..., j:j + 1] - centre_j) / half_j)
-        D.append(terms.d[..., j:j + 1] / half_j)
-        W.append(1.0)
+        if np.isfinite(drive):
+            centre_j, half_j = window(dq[..., j], drive - margin_v, brake - margin_v)
+            half_j = np.maximum(half_j, _LEAST_HALF_WIDTH_V)[..., None]
+            for out, term in zip((A, B, C, D), torque):
+                out.append(term[..., j:j + 1] / half_j)
+            C[-1] = C[-1] - centre_j[..., None] / half_j
+            W.append(1.0)
+    total = limits.supply_current_a()
+    if np.isfinite(total):
+        amps = np.array([m.count / m.resistance_ohm for m in limits.supply.motors]) / total
+        for sides in ((1.0, 1.0), (1.0, -1.0)):
+            weights = amps * sides
+            for out, term in zip((A, B, C, D), torque):
+                out.append(np.sum(term * weights, axis=-1, keepdims=True))
+            W.append(1.0)
     for j, cap in enumerate(limits.max_acceleration_rad_s2):
         if np.isfinite(cap):
             A.append(dq[..., j:j + 1])

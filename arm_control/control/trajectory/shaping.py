@@ -51,7 +51,7 @@ def _with_room(arm: ArmConfig) -> ForbiddenSpace:
 
 def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: TrajectoryLimits):
     """(amplitudes (H, 2) of the bend Σₕ aₕ·sin(hπσ/L) that make the path fastest, or
-    zeros; the (σ, sag, current cap) of the unbent path's bus, or None).
+    zeros; the (σ, sag) of the unbent path's bus, or None).
 
     A grid of the first harmonic's amplitudes, then ``_STEPS`` refinements over every
     combination of ±step; each batch timed at once.
@@ -64,20 +64,20 @@ def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: Trajecto
     q0, dq0, ddq0 = base(grid), base(grid, 1), base(grid, 2)
     steps = np.diff(grid)
 
-    def timed(terms, sag_v, current_cap_a):
-        A, B, C, D, W = rows(terms, limits, sag_v, current_cap_a)
+    def timed(terms, sag_v):
+        A, B, C, D, W = rows(terms, limits, sag_v)
         return fastest_speeds(A, B, C, D, W, speed_caps(limits, terms.dq), steps)
 
     one = PathTerms(dynamics, q0[None], dq0[None], ddq0[None])
 
-    def unshaped(sag_v, current_cap_a):
-        speed = timed(one, sag_v, current_cap_a)[0]
+    def unshaped(sag_v):
+        speed = timed(one, sag_v)[0]
         return speed ** 2 if np.all(np.isfinite(speed)) else None
 
-    x, sag, cap = under_the_bus(unshaped, PathTerms(dynamics, q0, dq0, ddq0), limits, grid)
+    x, sag = under_the_bus(unshaped, PathTerms(dynamics, q0, dq0, ddq0), limits, grid)
     if x is None:
         return zeros, None
-    bus = None if limits.supply is None else (grid, sag, cap)
+    bus = None if limits.supply is None else (grid, sag)
     unshaped_s = float(durations(steps, np.sqrt(x)[None])[0])
     if not unshaped_s >= _MIN_DURATION_S:
         return zeros, bus                          # a hop: the search would cost more
@@ -96,7 +96,7 @@ def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: Trajecto
         ok = np.all(ok, axis=1)
         out = np.full(len(shapes), np.inf)
         if np.any(ok):
-            speeds = timed(PathTerms(dynamics, q[ok], dq[ok], ddq[ok]), sag, cap)
+            speeds = timed(PathTerms(dynamics, q[ok], dq[ok], ddq[ok]), sag)
             out[ok] = durations(steps, speeds)
         return out
 

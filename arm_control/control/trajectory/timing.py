@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from arm_control.control.trajectory.bus import (bus_profile, exact_timing,
-                                                FINE_BUS_ITERATIONS, on_grid, under_the_bus)
+                                                FINE_BUS_ITERATIONS, under_the_bus)
 from arm_control.control.trajectory.limits import TrajectoryError, TrajectoryLimits
 from arm_control.control.trajectory.moving_start import time_moving
 from arm_control.control.trajectory.rows import PathTerms
@@ -35,7 +35,7 @@ class TimedPiece:
     grid: np.ndarray
     terms: PathTerms
     x: np.ndarray
-    bus: tuple = None           # the (σ, sag, current cap) the timing assumed
+    bus: tuple = None           # the (σ, sag) the timing assumed
 
     @property
     def start_speed(self) -> float:
@@ -45,24 +45,30 @@ class TimedPiece:
 def time_from_rest(path, grid, terms: PathTerms, limits: TrajectoryLimits,
                    margin_v: float = 0.0, bus_hint=None):
     """(x = ṡ² of the fastest rest-to-rest timing under the bus it leaves, back-EMF exact,
-    or None when the path cannot be followed; the (σ, sag, current cap) it assumed).
+    or None when the path cannot be followed; the (σ, sag) it assumed).
 
     The bus is found on a coarse grid first (``bus.bus_profile``, from ``bus_hint``, the
-    (σ, sag, current cap) of a like path), then only raised where it falls short on the
-    fine one."""
+    (σ, sag) of a like path), then only raised where it falls short on the fine one."""
     solve = exact_timing(terms, grid, limits, margin_v)
     if limits.supply is None:
-        return solve(0.0, None), None
-    sigma, sag, cap = bus_profile(path, terms.dynamics, limits, margin_v, 0.0, bus_hint)
-    x, sag, cap = under_the_bus(solve, terms, limits, grid, np.interp(grid, sigma, sag),
-                                on_grid(grid, sigma, cap), FINE_BUS_ITERATIONS, relax=0.0)
-    return x, (grid, sag, cap)
+        return solve(0.0), None
+    sigma, sag = bus_profile(path, terms.dynamics, limits, margin_v, 0.0, bus_hint)
+    x, fine = under_the_bus(solve, terms, limits, grid, np.interp(grid, sigma, sag),
+                            FINE_BUS_ITERATIONS, relax=0.0, give_up=True)
+    if x is None:
+        # The fine timing ran ahead of the coarse one's bus: start again from the most sag
+        # of each coarse point and its neighbours.
+        envelope = np.maximum(sag, np.maximum(np.append(sag[1:], sag[-1]),
+                                              np.insert(sag[:-1], 0, sag[0])))
+        x, fine = under_the_bus(solve, terms, limits, grid, np.interp(grid, sigma, envelope),
+                                FINE_BUS_ITERATIONS, relax=0.0)
+    return x, (grid, fine)
 
 
 def time_piece(path, grid, terms, limits, start_speed, margin_v=0.0, guess=None,
                bus_hint=None):
-    """(x, controllable start x, bus (σ, sag, current cap)): from rest exactly, else by
-    TOPP-RA; x None when there is none."""
+    """(x, controllable start x, bus (σ, sag)): from rest exactly, else by TOPP-RA; x None
+    when there is none."""
     if start_speed == 0.0:
         x, bus = time_from_rest(path, grid, terms, limits, margin_v, bus_hint)
         return x, 0.0, bus
@@ -140,8 +146,9 @@ def verified(pieces, start, end, dynamics: ArmDynamics,
         if verdict.passes:
             trajectory.peak_voltage = verdict.peak_voltage
             return trajectory
-        # Between grid points the exact model can ask a little more: tighten by the excess.
-        margin_v += max(verdict.excess_v, 0.0) + VOLTAGE_TOLERANCE
+        # Between grid points the exact model can ask a little more: tighten by the excess
+        # (a few volts at most: a bus that would brown out has none to measure it by).
+        margin_v += min(max(verdict.excess_v, 0.0), 2.0) + VOLTAGE_TOLERANCE
         solve_limits = dataclasses.replace(
             solve_limits,
             max_velocity_rad_s=tuple(np.array(solve_limits.max_velocity_rad_s)
