@@ -144,6 +144,7 @@ class ForbiddenSpace:
         self.rectangles = [
             (r.name, (r.x_min - grow, r.y_min - grow, r.x_max + grow, r.y_max + grow))
             for r in arm.world.regions]
+        self._bounds = np.array([rect for _, rect in self.rectangles]).T    # 4 × regions
         self.limits = np.array([[j.min_angle_rad, j.max_angle_rad] for j in arm.joints])
         self.max_elbow_fold_rad = math.pi - arm.world.min_elbow_fold_rad
         self.check_step_rad = arm.world.check_step_rad
@@ -163,12 +164,15 @@ class ForbiddenSpace:
                 & (np.abs(q[..., 1]) <= self.max_elbow_fold_rad))
 
     def collides(self, q) -> np.ndarray:
-        """Whether a point of either link lies in a forbidden rectangle (limits aside)."""
+        """Whether a point of either link lies in a forbidden rectangle (limits aside): every
+        rectangle at once, along a last axis."""
         q = np.asarray(q, dtype=float)
         hit = np.zeros(q.shape[:-1], dtype=bool)
+        if not self.rectangles:
+            return hit
         for link in self._links(q):
-            for _, rect in self.rectangles:
-                hit |= segments_hit_rectangle(*link, rect)
+            hit |= np.any(segments_hit_rectangle(*(end[..., None] for end in link),
+                                                 self._bounds), axis=-1)
         return hit
 
     def is_free(self, q) -> np.ndarray | bool:
