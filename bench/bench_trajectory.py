@@ -337,21 +337,23 @@ def what_if(count=None):
         for limit in WHAT_IF_LIMITS_A:
             arm = with_current_limit(base, limit)
             label = f'{limit:.0f} A' if math.isfinite(limit) else 'none'
+            cells = [f'{label}: traj s / min s', f'{label}: ratio', f'{label}: bus V / A']
+            row.update(dict.fromkeys(cells, ''))
             try:
                 trajectory = time_optimal_trajectory(
                     move.waypoints, ArmDynamics(arm), move.forbidden,
                     TrajectoryLimits.from_config(arm, controller))
             except TrajectoryError:
                 # No minimum either: the same arm cannot hold itself along the path.
-                row[f'{label}: traj s / min s'] = 'cannot hold'
+                row[cells[0]] = 'cannot hold'
                 continue
             times, _ = ocp.refined_minimum(arm, move.start_q, move.waypoints[-1],
                                            ocp.guess_from(trajectory, arm), knots=(50, 100))
             e = electrical(arm, trajectory)
-            row[f'{label}: traj s / min s'] = f'{trajectory.duration_s:.3f} / {times[-1]:.3f}'
-            row[f'{label}: ratio'] = f'{trajectory.duration_s / times[-1]:.3f}'
-            row[f'{label}: bus V / A'] = (f'{e["min_bus_v"]:.1f} / {e["peak_a"]:.0f}'
-                                          + (' BROWNOUT' if e['brownout'] else ''))
+            row[cells[0]] = f'{trajectory.duration_s:.3f} / {times[-1]:.3f}'
+            row[cells[1]] = f'{trajectory.duration_s / times[-1]:.3f}'
+            row[cells[2]] = (f'{e["min_bus_v"]:.1f} / {e["peak_a"]:.0f}'
+                             + (' BROWNOUT' if e['brownout'] else ''))
         rows.append(row)
         print(' | '.join(f'{k}={v}' for k, v in row.items()), file=sys.stderr, flush=True)
     print('Timed trajectory (the controller limits) against the electrical minimum '
