@@ -14,10 +14,11 @@ simulated time in-process on ``ArmPlant`` with sensor noise, physics on 1 ms ste
   V = 12·clamp(kP·e + kD·Δe, −1, 1) + m·g·(L/2)·cos θ in volts (an uncoupled rod per link,
   θ the link's own heading), shoulder kP 2.00 kD 0.04, elbow kP 1.75 kD 0.02, the elbow
   branch by the seed's quadrant rule (elbow negative for x ≥ 0, positive for x < 0), 50 Hz;
-- the minimum (``--minimum``): direct collocation (casadi + IPOPT, ``bench_trajectory``) with
+- the minimum (``--minimum``): direct collocation (casadi + IPOPT, ``minimum_time``) with
   the knot count refined 25 → 50 → 100, on every free elbow branch of the goal, the least
-  kept: the fastest any controller could go under 12 V and the floor; and the least whole
-  number of 20 ms periods of constant voltage that bring the arm from rest to rest ("50 Hz
+  kept: the fastest any controller could go under the sim's electrical limits (current
+  limits, bus sag, brownout) and the floor; and the least whole number of 20 ms periods of
+  constant voltage, within those limits, that bring the arm from rest to rest ("50 Hz
   min"): what holding each command for a 50 Hz period alone costs.
 
 Each move starts from rest, held for 0.5 s; the goal is given at t = 0. Measured on the
@@ -25,7 +26,10 @@ true state every 1 ms: move time (from the goal to within goal_tolerance_rad on 
 and slower than settled_velocity_rad_s, for good), final error (1 s after that), overshoot
 (how far a joint goes past the goal, in the direction it was moving, after both first
 get within tolerance), peak |voltage|,
-the lowest point of the elbow or the tool (below 0: floor contact). Then the cost of
+the lowest point of the elbow or the tool (below 0: floor contact), and from the plant's
+electrical model: the lowest bus voltage, the peak motor current, the energy drawn from the
+battery over the move (∫ V_bus·I_supply dt from the goal to the arrival; regeneration
+counts against it) and any brownout. Then the cost of
 latency: ours with the plan taken only at the next regular 50 Hz tick, and at 200 Hz.
 
     python bench/bench_controller.py                 # the suite, side by side
@@ -46,10 +50,11 @@ BENCH = Path(__file__).resolve().parent
 sys.path[:0] = [str(BENCH), str(BENCH.parent)]       # the suite beside, the package above
 
 from bench_trajectory import _start_configuration, Move, SUITE  # noqa: E402 (one suite)
+import minimum_time as ocp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from arm_control import config  # noqa: E402
-from arm_control.control.arm_controller import ArmController  # noqa: E402
+from arm_control.control.controller import ArmController  # noqa: E402
 from arm_control.control.goals import GoalValidator  # noqa: E402
 from arm_control.control.trajectory import (time_optimal_trajectory,  # noqa: E402
                                             TrajectoryLimits)
@@ -101,7 +106,7 @@ class SeedController:
 
 
 class PlanHandOff:
-    """The core's planner hand-off (``take_plan_requests`` → ``plan_directly`` →
+    """The core's planner hand-off (``take_plan_requests`` → ``plan_and_time`` →
     ``on_timed_plan``). Each request is planned at once; the plan is ready after the CPU
     time that took (path + branch choice + timing) and is taken then, by an extra control
     cycle (``at_next_tick`` False), or only at the next regular tick (True)."""
@@ -115,7 +120,7 @@ class PlanHandOff:
     def after_step(self, now_s):
         for request in self.core.take_plan_requests():
             cpu, wall = time.thread_time(), time.perf_counter()
-            timed = self.core.plan_directly(request, self.planner)
+            timed = self.core.plan_timer.plan_and_time(request, self.planner)
             cpu, wall = time.thread_time() - cpu, time.perf_counter() - wall
             self.plan_cpu_s.append(cpu)
             self.plan_wall_s.append(wall)
@@ -146,6 +151,10 @@ class Run:
     overshoot_deg: float = math.nan      # n/a: never within tolerance
     peak_voltage: float = 0.0
     lowest_m: float = math.inf
+    min_bus_v: float = math.nan
+    peak_current_a: float = math.nan
+    energy_j: float = math.nan           # drawn from the battery from the goal to arrival
+    brownouts: int = 0
     reached: bool = False
     plan_arrived_s: float = math.nan     # ours: when the timed plan was taken
     trajectory_s: float = math.nan       # ours: how long its trajectory lasts
@@ -161,17 +170,20 @@ def heights_m(arm, q):
     return np.minimum(elbow_y, elbow_y + arm.elbow.length_m * np.sin(q[:, 0] + q[:, 1]))
 
 
-def measure(arm, controller_config, times, states, voltages, goal_q, start_q) -> Run:
-    """Move time, final error, overshoot, peak voltage and lowest point of a recorded run."""
+def measure(arm, controller_config, record, goal_q, start_q) -> Run:
+    """Move time, final error, overshoot, peak voltage, lowest point and electrics of a
+    recorded run."""
     tolerance = controller_config.goal_tolerance_rad
     still_below = controller_config.settled_velocity_rad_s
-    times, states, voltages = np.array(times), np.array(states), np.array(voltages)
+    times, states, voltages = (np.array(record[k]) for k in ('time', 'state', 'voltage'))
+    power = np.array(record['power'])          # bus V, |motor current| A ×2, supply A
     after = times >= -1e-9
-    t, x, v = times[after], states[after], voltages[after]
+    t, x, v, p = times[after], states[after], voltages[after], power[after]
     error = np.abs(x[:, :2] - goal_q)
     inside = np.all(error < tolerance, axis=1)
     still = np.all(np.abs(x[:, 2:]) < still_below, axis=1)
-    run = Run(peak_voltage=float(np.max(np.abs(v))), lowest_m=float(np.min(heights_m(arm, x))))
+    run = Run(peak_voltage=float(np.max(np.abs(v))), lowest_m=float(np.min(heights_m(arm, x))),
+              brownouts=record['brownouts'])
     # Settled: inside from here to the end, and still at that moment.
     outside_after = np.flatnonzero(~inside)
     first_for_good = 0 if len(outside_after) == 0 else outside_after[-1] + 1
@@ -183,6 +195,10 @@ def measure(arm, controller_config, times, states, voltages, goal_q, start_q) ->
         run.final_error_deg = float(np.degrees(np.max(error[min(j, len(t) - 1)])))
     else:
         run.final_error_deg = float(np.degrees(np.max(error[-1])))
+    moving = t <= (run.move_s if run.reached else t[-1]) + 1e-9
+    run.min_bus_v = float(np.min(p[moving, 0]))
+    run.peak_current_a = float(np.max(p[moving, 1:3]))
+    run.energy_j = float(np.sum(p[moving, 0] * p[moving, 3]) * PHYSICS_MS / 1000.0)
     arrived = np.flatnonzero(inside)    # past the goal after both first get within tolerance
     if len(arrived):
         i = arrived[0]
@@ -193,19 +209,21 @@ def measure(arm, controller_config, times, states, voltages, goal_q, start_q) ->
     return run
 
 
-def simulate(arm, controller_config, controller, on_goal, start_q, seed, hand_off=None):
+def simulate(arm, controller_config, controller, on_goal, start_q, seed, hand_off=None,
+             plant_arm=None):
     """Hold at the start, give the goal at t = 0, run until settled for 1 s or timed out.
 
     Whole milliseconds: regular control cycles every period from −0.5 s, plus a cycle
     whenever ``hand_off`` has a plan ready; the true state is recorded every millisecond.
+    The plant is ``plant_arm`` (default ``arm``: the controller's model is the truth).
     """
-    plant = ArmPlant(arm, start_q, seed=seed)
+    plant = ArmPlant(plant_arm or arm, start_q, seed=seed)
     period_ms = 1000.0 / controller_config.loop_rate_hz
     if abs(period_ms - round(period_ms)) > 1e-9:
         raise ValueError(f'the bench needs a whole-millisecond period, not {period_ms} ms')
     period_ms = int(round(period_ms))
     first_ms, last_ms = -int(HOLD_BEFORE_S * 1000), int(TIMEOUT_S * 1000)
-    times, states, voltages = [], [], []
+    record = {'time': [], 'state': [], 'voltage': [], 'power': []}
     still_count, needed = 0, int((FINAL_AFTER_S + 0.1) * 1000 / PHYSICS_MS)
     reference = None
     for now_ms in range(first_ms, last_ms, PHYSICS_MS):
@@ -222,9 +240,12 @@ def simulate(arm, controller_config, controller, on_goal, start_q, seed, hand_of
                 hand_off.after_step(now_s)
         plant.advance(PHYSICS_MS / 1000.0)
         state = np.array(plant.state)
-        times.append(now_s + PHYSICS_MS / 1000.0)
-        states.append(state)
-        voltages.append(np.array(plant.voltage))
+        record['time'].append(now_s + PHYSICS_MS / 1000.0)
+        record['state'].append(state)
+        record['voltage'].append(np.array(plant.voltage))
+        power = plant.power
+        record['power'].append((power.bus_voltage, abs(power.motor_current_a[0]),
+                                abs(power.motor_current_a[1]), power.supply_current_a))
         # Stop early once the arm has been still for a while (measure() decides the rest).
         if now_ms > 0 and np.all(np.abs(state[2:]) < controller_config.settled_velocity_rad_s):
             if reference is None or np.max(np.abs(state[:2] - reference)) > 1e-3:
@@ -234,7 +255,8 @@ def simulate(arm, controller_config, controller, on_goal, start_q, seed, hand_of
                 break
         else:
             reference, still_count = None, 0
-    return times, states, voltages
+    record['brownouts'] = len(plant.brownouts) + (plant.browned_out_since_s is not None)
+    return record
 
 
 class _Timed:
@@ -254,13 +276,13 @@ def run_ours(arm, controller_config, planner, start_q, goal_xy, seed, at_next_ti
     core = ArmController(arm, controller_config)
     hand_off = PlanHandOff(core, planner, at_next_tick)
     timed = _Timed(core)
-    times, states, voltages = simulate(
-        arm, controller_config, timed, lambda t: core.submit_goal(t, *goal_xy), start_q, seed,
-        hand_off)
-    goal_q = core.goal_q if core.goal_q is not None else np.full(2, np.nan)
-    run = measure(arm, controller_config, times, states, voltages, goal_q, start_q)
-    if core.last_timed_plan is not None and core.last_timed_plan.ok:
-        run.trajectory_s = core.last_timed_plan.trajectory.duration_s
+    record = simulate(arm, controller_config, timed, lambda t: core.submit_goal(t, *goal_xy),
+                      start_q, seed, hand_off)
+    goal_q = core.goals.goal_q if core.goals.goal_q is not None else np.full(2, np.nan)
+    run = measure(arm, controller_config, record, goal_q, start_q)
+    last = core.goals.plans.last
+    if last is not None and last.ok:
+        run.trajectory_s = last.trajectory.duration_s
         run.plan_arrived_s = hand_off.delivered_s
     run.plan_cpu_ms = 1000 * sum(hand_off.plan_cpu_s)
     run.plan_wall_ms = 1000 * sum(hand_off.plan_wall_s)
@@ -278,9 +300,8 @@ def run_seed(arm, controller_config, start_q, goal_xy, seed):
         seed_controller.previous_error = None
 
     seed_config = replace(controller_config, loop_rate_hz=SEED_RATE_HZ)
-    times, states, voltages = simulate(arm, seed_config, seed_controller, give_goal, start_q,
-                                       seed)
-    return measure(arm, seed_config, times, states, voltages, goal_q, start_q)
+    record = simulate(arm, seed_config, seed_controller, give_goal, start_q, seed)
+    return measure(arm, seed_config, record, goal_q, start_q)
 
 
 def fmt(value, spec='.2f'):
@@ -290,13 +311,14 @@ def fmt(value, spec='.2f'):
 # --- the minimum time -------------------------------------------------------------------
 
 def minimum_times(arm, controller_config, moves):
-    """Per move: the direct-collocation minimum time over the goal's free elbow branches
-    (knots refined 25 → 50 → 100) and the 50 Hz minimum on the fastest branch."""
-    import bench_trajectory as bt
+    """Per move: the direct-collocation minimum time under the electrical limits over the
+    goal's free elbow branches (knots refined 25 → 50 → 100) and the 50 Hz minimum on the
+    fastest branch."""
     dynamics, forbidden = ArmDynamics(arm), ForbiddenSpace(arm)
     planner = Planner(arm, config.load('planner')[1])
     validator = GoalValidator(arm)
-    loose = TrajectoryLimits((1e3, 1e3), (1e4, 1e4), arm.battery.nominal_voltage)
+    whole = TrajectoryLimits.from_config(arm, replace(
+        controller_config, feedback_voltage_reserve=0.0, driving_voltage_reserve=0.0))
     out = {}
     for name, start_xy, goal_xy in moves:
         move = Move(name, start_xy, goal_xy, arm, controller_config, dynamics, forbidden, None)
@@ -307,76 +329,22 @@ def minimum_times(arm, controller_config, moves):
             if not plan.ok:
                 continue
             waypoints = np.array(plan.waypoints_rad)
-            fast = time_optimal_trajectory(waypoints, dynamics, forbidden, loose)
-            guess = bt._guess_from(fast, dynamics, arm.battery.nominal_voltage)
-            knots = []
-            for count in bt.KNOTS:
-                result = bt.minimum_time(arm, start_q, waypoints[-1], count, guess)
-                knots.append(math.nan if result is None else result['time_s'])
-                guess = result or guess
+            fast = time_optimal_trajectory(waypoints, dynamics, forbidden, whole)
+            knots, guess = ocp.refined_minimum(arm, start_q, waypoints[-1],
+                                               ocp.guess_from(fast, arm))
             if math.isfinite(knots[-1]) and (best is None or knots[-1] < best['min_s']):
                 best = {'min_s': knots[-1], 'knots_s': knots, 'goal_q': list(waypoints[-1]),
                         'guess': guess}
         if best is None:
             out[name] = {'min_s': math.nan, 'knots_s': [], 'zoh_s': math.nan}
             continue
-        best['zoh_s'] = minimum_time_zoh(arm, start_q, np.array(best['goal_q']),
-                                         best.pop('guess'), best['min_s'])
+        best['zoh_s'] = ocp.minimum_time_zoh(arm, start_q, np.array(best['goal_q']),
+                                             best.pop('guess'), best['min_s'], ZOH_PERIOD_S)
         out[name] = best
-        print(f'  minimum {name}: {best["min_s"]:.3f} s (knots {bt.KNOTS}: '
+        print(f'  minimum {name}: {best["min_s"]:.3f} s (knots {ocp.KNOTS}: '
               f'{", ".join(f"{t:.4f}" for t in best["knots_s"])}), 50 Hz: '
               f'{best["zoh_s"]:.2f} s', file=sys.stderr, flush=True)
     return out
-
-
-def minimum_time_zoh(arm, start_q, goal_q, guess, minimum_s, period_s=ZOH_PERIOD_S,
-                     substeps=10):
-    """The fewest whole periods of constant voltage (|V| ≤ 12 V, RK4 on ``substeps`` per
-    period, the floor at every period's end) that take the arm from rest to rest at the
-    goal: the least time a controller holding each command for a period can take."""
-    import casadi
-    import bench_trajectory as bt
-    f = bt.casadi_derivative(arm)
-    upper, fore = arm.shoulder.length_m, arm.elbow.length_m
-    count = max(1, math.ceil(minimum_s / period_s - 1e-9))
-    for count in range(count, count + 6):
-        opti = casadi.Opti()
-        x = opti.variable(4, count + 1)
-        u = opti.variable(2, count)
-        h = period_s / substeps
-        for k in range(count):
-            state = x[:, k]
-            for _ in range(substeps):
-                k1 = f(state, u[:, k])
-                k2 = f(state + h / 2 * k1, u[:, k])
-                k3 = f(state + h / 2 * k2, u[:, k])
-                k4 = f(state + h * k3, u[:, k])
-                state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-            opti.subject_to(x[:, k + 1] == state)
-        volts = arm.battery.nominal_voltage
-        opti.subject_to(opti.bounded(-volts, casadi.vec(u), volts))
-        elbow_y = upper * casadi.sin(x[0, :])
-        opti.subject_to(elbow_y >= 0)
-        opti.subject_to(elbow_y + fore * casadi.sin(x[0, :] + x[1, :]) >= 0)
-        opti.subject_to(x[:, 0] == np.concatenate([start_q, [0.0, 0.0]]))
-        opti.subject_to(x[:, count] == np.concatenate([goal_q, [0.0, 0.0]]))
-        opti.minimize(1e-4 * casadi.sumsqr(u))
-        fractions = np.linspace(0.0, 1.0, count + 1)
-        mids = 0.5 * (fractions[1:] + fractions[:-1])
-        opti.set_initial(x, np.column_stack([np.interp(fractions, guess['fraction'],
-                                                       guess['state'][:, k])
-                                             for k in range(4)]).T)
-        opti.set_initial(u, np.column_stack([np.interp(mids, guess['fraction'],
-                                                       guess['voltage'][:, k])
-                                             for k in range(2)]).T)
-        opti.solver('ipopt', {'print_time': False},
-                    {'print_level': 0, 'max_iter': 500, 'sb': 'yes'})
-        try:
-            opti.solve()
-            return count * period_s
-        except RuntimeError:
-            continue
-    return math.nan
 
 
 def load_or_compute_minimum(arm, controller_config, moves, cache_path):
@@ -450,7 +418,8 @@ def main(argv):
     if minimum:
         header += ['min s', '50 Hz min s', 'ours/min', 'traj/min']
     header += ['traj s', 'plan ms', 'final err deg ours/seed', 'overshoot deg ours/seed',
-               'peak V ours/seed', 'lowest mm ours/seed']
+               'peak V ours/seed', 'lowest mm ours/seed', 'min bus V ours/seed',
+               'peak A ours/seed', 'energy J ours/seed', 'brownouts ours/seed']
     print('| ' + ' | '.join(header) + ' |')
     print('|' + '---|' * len(header))
     for name, ours, seed_run, _ in rows:
@@ -464,7 +433,11 @@ def main(argv):
                   f'{fmt(ours.final_error_deg)} / {fmt(seed_run.final_error_deg)}',
                   f'{fmt(ours.overshoot_deg)} / {fmt(seed_run.overshoot_deg)}',
                   f'{ours.peak_voltage:.1f} / {fmt(seed_run.peak_voltage, ".1f")}',
-                  f'{1000 * ours.lowest_m:.0f} / {fmt(1000 * seed_run.lowest_m, ".0f")}']
+                  f'{1000 * ours.lowest_m:.0f} / {fmt(1000 * seed_run.lowest_m, ".0f")}',
+                  f'{fmt(ours.min_bus_v)} / {fmt(seed_run.min_bus_v)}',
+                  f'{fmt(ours.peak_current_a, ".0f")} / {fmt(seed_run.peak_current_a, ".0f")}',
+                  f'{fmt(ours.energy_j, ".0f")} / {fmt(seed_run.energy_j, ".0f")}',
+                  f'{ours.brownouts} / {seed_run.brownouts}']
         print('| ' + ' | '.join(cells) + ' |')
 
     reached = [r for _, r, _, _ in rows if r.reached]
@@ -491,9 +464,8 @@ def main(argv):
           f'planning apart): median {np.median(cycles):.2f} ms, p99 '
           f'{np.percentile(cycles, 99):.2f} ms of the {1000 / rate:g} ms period')
     if minimum:
-        import bench_trajectory as bt
-        print(f'\nMinimum time (direct collocation, least over the free elbow branches) as the '
-              f'knots are refined {bt.KNOTS}:')
+        print(f'\nMinimum time (direct collocation under the electrical limits, least over the '
+              f'free elbow branches) as the knots are refined {ocp.KNOTS}:')
         for name, _, _, _ in rows:
             knots = minimum.get(name, {}).get('knots_s', [])
             change = (abs(knots[-1] - knots[-2]) / knots[-1] if len(knots) > 1 else math.nan)

@@ -28,7 +28,6 @@ with sensor noise, physics on 1 ms steps:
     python bench/bench_sysid.py --seeds 12        # only: is the stated ±1σ honest?
 """
 
-from contextlib import contextmanager
 from dataclasses import replace
 import math
 from pathlib import Path
@@ -46,7 +45,6 @@ from scipy.signal import savgol_filter  # noqa: E402
 from arm_control import config, parameters  # noqa: E402
 from arm_control.control.controller import ArmController  # noqa: E402
 from arm_control.model.dynamics import ArmDynamics, rk4  # noqa: E402
-from arm_control.model.plant import ArmPlant  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
 from arm_control.sysid.fit import fit_log  # noqa: E402
@@ -115,37 +113,23 @@ def sensed_states(times_s, positions, window_s=0.3):
 
 # --- the controller on the true arm -----------------------------------------------------
 
-@contextmanager
-def plant_is(truth):
-    """bench_controller builds its plant from the controller's arm; here it is the truth."""
-    original = bc.ArmPlant
-    bc.ArmPlant = lambda arm, start, seed=0: ArmPlant(truth, start, seed=seed)
-    try:
-        yield
-    finally:
-        bc.ArmPlant = original
-
-
 def run_suite(controller_arm, truth, controller_config, planner, moves):
     """Each move: the controller with ``controller_arm`` on the true arm, measured; and the
     trace (times, true states, applied voltages), 1 ms apart."""
     rows, traces = [], []
     forbidden = ForbiddenSpace(truth)
-    with plant_is(truth):
-        for name, start_xy, goal_xy in moves:
-            index = SUITE.index((name, start_xy, goal_xy))
-            move = Move(name, start_xy, goal_xy, truth, controller_config, None, forbidden,
-                        None)
-            start_q = _start_configuration(move)
-            core = ArmController(controller_arm, controller_config)
-            hand_off = bc.PlanHandOff(core, planner)
-            times, states, voltages = bc.simulate(
-                controller_arm, controller_config, core,
-                lambda t: core.submit_goal(t, *goal_xy), start_q, index, hand_off)
-            goal_q = core.goals.goal_q if core.goals.goal_q is not None else np.full(2, np.nan)
-            rows.append((name, bc.measure(truth, controller_config, times, states, voltages,
-                                          goal_q, start_q)))
-            traces.append((np.array(times), np.array(states), np.array(voltages)))
+    for name, start_xy, goal_xy in moves:
+        index = SUITE.index((name, start_xy, goal_xy))
+        move = Move(name, start_xy, goal_xy, truth, controller_config, None, forbidden, None)
+        start_q = _start_configuration(move)
+        core = ArmController(controller_arm, controller_config)
+        hand_off = bc.PlanHandOff(core, planner)
+        record = bc.simulate(controller_arm, controller_config, core,
+                             lambda t: core.submit_goal(t, *goal_xy), start_q, index, hand_off,
+                             plant_arm=truth)
+        goal_q = core.goals.goal_q if core.goals.goal_q is not None else np.full(2, np.nan)
+        rows.append((name, bc.measure(truth, controller_config, record, goal_q, start_q)))
+        traces.append(tuple(np.array(record[key]) for key in ('time', 'state', 'voltage')))
     return rows, traces
 
 

@@ -3,32 +3,52 @@
 For each move of the default arm (start and goal points in arm_base): the planner's joint path
 (``Planner.plan``; IK and a checked straight joint line when the planner is missing), then
 
-- traj: ``time_optimal_trajectory`` from that path with the controller's limits (12 V
-  driving, 12 V less the feedback reserve braking, the speed and acceleration limits): the
-  path reshaped where that is faster, then timed; its duration, the time to compute it, its
-  peak feedforward voltage, its lowest point;
+- traj: ``time_optimal_trajectory`` from that path with the controller's limits (the bus
+  less no reserve driving, less the feedback reserve braking; the current limits; speed and
+  acceleration caps when set): the path reshaped where that is faster, then timed; its
+  duration, the time to compute it, and along it, with the sim's electrical model
+  (``PowerSupply.solve`` on its feedforward volts): the peak commanded |V|, the lowest bus
+  voltage, the peak motor current, and the share of samples the motor controllers would
+  have to lower (clipped); its lowest point;
 - unshaped: the same on the planner's path as it is (``reshape=False``): what reshaping gains;
-- 12 V: reshaped and timed with the whole 12 V both ways and no speed or acceleration
-  limits, to separate what the margins cost from what the path and the method cost;
-- minimum time: a direct-collocation optimal-control solve (casadi + IPOPT, Hermite-Simpson)
-  of the free-path problem: the full coupled dynamics ẋ = f(x, u) written in casadi, |u| ≤
-  12 V, the elbow and the tool above the floor (y ≥ 0), the joint limits and the elbow fold,
-  start and end at rest. The knot count is refined (25, 50, 100) and each time printed, with
-  the last change, which must be small (≤ 0.5 %) for the minimum time to count as settled.
-  IPOPT finds a local optimum, started from the timed trajectory;
+- no reserve: reshaped and timed with the whole supply both ways: what the reserves cost;
+- ideal supply: the controller's limits on an ideal supply (no current limit, no battery
+  resistance): what the electrical limits cost, and the figure to compare with the timing
+  of a 12 V-only planner;
+- minimum time (``minimum_time``): direct collocation (casadi + IPOPT) of the free-path
+  problem under the same electrical limits the sim imposes (current limits, bus sag,
+  brownout), floor, joint limits and elbow fold, rest at both ends. The knot count is
+  refined (25, 50, 100) and each time printed, with the last change, which must be small
+  (≤ 0.5 %) for the minimum time to count as settled. IPOPT finds a local optimum, started
+  from the timed trajectory;
 - preempted: halfway through, a new goal back at the start point, replanned and timed from
   the moving state (the arm's velocity then).
 
 Times to compute are medians of 5 runs, as CPU time (what the computation costs) and wall
 time (which also counts whatever else shares the machine's two cores).
 
+``--what-if``: the current limits at 40, 60, 80 and 120 A per motor (and none): per move,
+the timed trajectory's duration against the electrical minimum at that limit.
+
+``--planning``: what a goal costs the controller (``ArmController.plan_directly``): the path
+of each free elbow branch (planner), the branch choice (the quick estimates), the timing of
+the branches kept, and the total, median and p95 over repeats, CPU and wall, on the default
+arm (this suite) and on the FRC robot (its 30 preset-to-preset moves). To measure it on a
+busy machine, two busy loops beside it:
+
+    for i in 1 2; do timeout 120 python3 -c 'while True: pass' & done; \
+        python bench/bench_trajectory.py --planning; kill %1 %2
+
 Columns are plain functions of a ``Move`` returning {column name: text}; add one to
 ``COLUMNS`` (a closed-loop column goes next to the others).
 
     python bench/bench_trajectory.py            # all moves
     python bench/bench_trajectory.py 3          # only the first three
+    python bench/bench_trajectory.py --what-if
+    python bench/bench_trajectory.py --planning [repeats]
 """
 
+import dataclasses
 from dataclasses import dataclass, field
 import math
 from pathlib import Path
@@ -36,21 +56,22 @@ import statistics
 import sys
 import time
 
-import casadi
-import numpy as np
+BENCH = Path(__file__).resolve().parent
+sys.path[:0] = [str(BENCH), str(BENCH.parent)]       # the OCP beside, the package above
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))     # the package above
+import minimum_time as ocp  # noqa: E402
+import numpy as np  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.trajectory import (time_optimal_trajectory,  # noqa: E402
-                                            trajectory_voltage, TrajectoryLimits)
-from arm_control.model.dynamics import ArmDynamics, COULOMB_SMOOTHING_RAD_S  # noqa: E402
+                                            TrajectoryError, TrajectoryLimits)
+from arm_control.model.dynamics import ArmDynamics  # noqa: E402
+from arm_control.model.electrical import PowerSupply  # noqa: E402
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
 
-KNOTS = (25, 50, 100)
-CONVERGED = 0.005           # relative change of the minimum time that counts as settled
 TIMING_REPEATS = 5
+WHAT_IF_LIMITS_A = (40.0, 60.0, 80.0, 120.0, math.inf)
 
 # (name, start point, goal point) in arm_base (m); the start takes the elbow-negative branch
 # when it is free (the seed's start pose has the elbow at -90 deg).
@@ -152,24 +173,52 @@ _PLANNERS = {}
 
 # --- columns --------------------------------------------------------------------------
 
+def electrical(arm, trajectory, count=1500):
+    """Along the trajectory, with the sim's electrical model on its feedforward volts:
+    peak commanded |V|, lowest bus voltage, the peak motor current the feedforward asks for
+    (A, before any limiting), the share of samples the motor controllers would lower (the
+    current limit or the bus), and whether any sample browns out."""
+    dynamics = ArmDynamics(arm)
+    supply = PowerSupply(arm, dynamics.motors)
+    times = np.linspace(0.0, trajectory.duration_s, count)
+    q, qd, qdd = trajectory.sample_many(times)
+    volts = dynamics.voltages(q, qd, qdd)
+    powers = [supply.solve(v, w) for v, w in zip(volts, qd)]
+    applied = np.array([p.applied_v for p in powers])
+    asked = [[m.current_a(v[j], w[j]) for j, m in enumerate(dynamics.motors)]
+             for v, w in zip(volts, qd)]
+    return {'peak_v': float(np.max(np.abs(volts))),
+            'min_bus_v': min(p.bus_voltage for p in powers),
+            'peak_a': float(np.max(np.abs(asked))),
+            'clipped': float(np.mean(np.any(np.abs(applied - volts) > 0.05, axis=1))),
+            'brownout': any(p.browned_out for p in powers)}
+
+
+def _electrical_cells(arm, trajectory, prefix=''):
+    e = electrical(arm, trajectory)
+    return {f'{prefix}peak V': f'{e["peak_v"]:.2f}',
+            f'{prefix}min bus V': f'{e["min_bus_v"]:.2f}' + (' BROWNOUT' if e['brownout']
+                                                             else ''),
+            f'{prefix}peak A': f'{e["peak_a"]:.0f}',
+            f'{prefix}clipped': f'{100 * e["clipped"]:.0f} %'}
+
+
 def column_path(move: Move) -> dict:
     return {'path': f'{move.path_source}, {len(move.waypoints)} pts',
             'path ms cpu': f'{move.path_ms:.1f}'}
 
 
 def column_trajectory(move: Move) -> dict:
-    """The trajectory the controller gets: duration, time to compute, peak volts, floor."""
+    """The trajectory the controller gets: duration, time to compute, electrics, floor."""
     trajectory, cpu_ms, wall_ms = timed(lambda: time_optimal_trajectory(
         move.waypoints, move.dynamics, move.forbidden, move.limits))
     move.trajectory = trajectory
-    times = np.linspace(0.0, trajectory.duration_s, 3000)
-    peak = np.max(np.abs(trajectory_voltage(trajectory, move.dynamics, times)))
-    q, _, _ = trajectory.sample_many(times)
-    lowest_mm = 1e3 * float(np.min(_heights(move.arm, q)))
+    q, _, _ = trajectory.sample_many(np.linspace(0.0, trajectory.duration_s, 3000))
     move.results['traj_s'] = trajectory.duration_s
     return {'traj s': f'{trajectory.duration_s:.3f}',
             'timing ms cpu/wall': f'{cpu_ms:.1f}/{wall_ms:.0f}',
-            'peak V': f'{peak:.2f}', 'lowest mm': f'{lowest_mm:.0f}'}
+            **_electrical_cells(move.arm, trajectory),
+            'lowest mm': f'{1e3 * float(np.min(_heights(move.arm, q))):.0f}'}
 
 
 def column_unshaped(move: Move) -> dict:
@@ -180,37 +229,47 @@ def column_unshaped(move: Move) -> dict:
     return {'unshaped s': f'{trajectory.duration_s:.3f}'}
 
 
-def column_full_voltage(move: Move) -> dict:
-    """The same path and method at the whole 12 V with no speed or acceleration limits."""
-    loose = TrajectoryLimits((1e3, 1e3), (1e4, 1e4), move.arm.battery.nominal_voltage)
-    trajectory = time_optimal_trajectory(move.waypoints, move.dynamics, move.forbidden, loose)
-    move.results['full_12v_s'] = trajectory.duration_s
-    return {'12 V s': f'{trajectory.duration_s:.3f}'}
+def column_no_reserve(move: Move) -> dict:
+    """The same path and method with the whole supply both ways."""
+    whole = TrajectoryLimits.from_config(move.arm, dataclasses.replace(
+        move.controller, feedback_voltage_reserve=0.0, driving_voltage_reserve=0.0))
+    trajectory = time_optimal_trajectory(move.waypoints, move.dynamics, move.forbidden, whole)
+    move.results['no_reserve_s'] = trajectory.duration_s
+    return {'no reserve s': f'{trajectory.duration_s:.3f}'}
+
+
+def ideal_supply(arm):
+    """The arm on a perfect supply: no current limits, no battery resistance."""
+    joints = {j.name: dataclasses.replace(j, current_limit_a=math.inf) for j in arm.joints}
+    battery = dataclasses.replace(arm.battery, resistance_ohm=0.0)
+    return dataclasses.replace(arm, battery=battery, **joints)
+
+
+def column_ideal_supply(move: Move) -> dict:
+    """The controller's limits on an ideal supply: what the electrical limits cost."""
+    arm = ideal_supply(move.arm)
+    trajectory = time_optimal_trajectory(move.waypoints, ArmDynamics(arm), move.forbidden,
+                                         TrajectoryLimits.from_config(arm, move.controller))
+    return {'ideal supply s': f'{trajectory.duration_s:.3f}'}
 
 
 def column_minimum_time(move: Move) -> dict:
-    """Direct collocation on 25, 50, 100 knots: the time must settle (last change ≤ 0.5 %)."""
-    guess = _guess_from(move.trajectory, move.dynamics, move.arm.battery.nominal_voltage)
-    times, solve_s = [], 0.0
-    for knots in KNOTS:
-        begin = time.perf_counter()
-        result = minimum_time(move.arm, move.start_q, move.waypoints[-1], knots, guess)
-        solve_s += time.perf_counter() - begin
-        if result is None:
-            times.append(math.nan)
-            continue
-        times.append(result['time_s'])
-        guess = result
+    """Direct collocation on 25, 50, 100 knots under the electrical limits: the time must
+    settle (last change ≤ 0.5 %)."""
+    guess = ocp.guess_from(move.trajectory, move.arm)
+    begin = time.perf_counter()
+    times, _ = ocp.refined_minimum(move.arm, move.start_q, move.waypoints[-1], guess)
+    solve_s = time.perf_counter() - begin
     best = times[-1]
     move.results['minimum_s'] = best
     out = {f'min N={n}': (f'{t:.4f}' if math.isfinite(t) else 'fail')
-           for n, t in zip(KNOTS, times)}
+           for n, t in zip(ocp.KNOTS, times)}
     change = abs(times[-1] - times[-2]) / times[-1]
-    out['last change'] = f'{100 * change:.2f} %' + ('' if change <= CONVERGED else ' (!)')
+    out['last change'] = f'{100 * change:.2f} %' + ('' if change <= ocp.CONVERGED else ' (!)')
     out['solve s'] = f'{solve_s:.1f}'
-    out['traj/min'] = f'{move.results["traj_s"] / best:.3f}'
-    out['unshaped/min'] = f'{move.results["unshaped_s"] / best:.3f}'
-    out['12 V/min'] = f'{move.results["full_12v_s"] / best:.3f}'
+    for key, label in (('traj_s', 'traj/min'), ('unshaped_s', 'unshaped/min'),
+                       ('no_reserve_s', 'no reserve/min')):
+        out[label] = f'{move.results[key] / best:.3f}'
     return out
 
 
@@ -219,19 +278,23 @@ def column_preempted(move: Move) -> dict:
     half = 0.5 * move.trajectory.duration_s
     q, qd, _ = move.trajectory.sample(half)
     waypoints = _joint_path(move, q, move.start_xy)
-    trajectory, cpu_ms, wall_ms = timed(lambda: time_optimal_trajectory(
-        waypoints, move.dynamics, move.forbidden, move.limits, start_velocity_rad_s=qd))
-    times = np.linspace(0.0, trajectory.duration_s, 3000)
-    peak = np.max(np.abs(trajectory_voltage(trajectory, move.dynamics, times)))
+    try:
+        trajectory, cpu_ms, wall_ms = timed(lambda: time_optimal_trajectory(
+            waypoints, move.dynamics, move.forbidden, move.limits, start_velocity_rad_s=qd))
+    except TrajectoryError as error:
+        return {'preempt |q̇| rad/s': f'{np.linalg.norm(qd):.2f}', 'preempt s': 'none',
+                'preempt ms cpu/wall': str(error)}
+    cells = _electrical_cells(move.arm, trajectory, 'preempt ')
     return {'preempt |q̇| rad/s': f'{np.linalg.norm(qd):.2f}',
             'preempt s': f'{trajectory.duration_s:.3f}',
             'preempt ms cpu/wall': f'{cpu_ms:.1f}/{wall_ms:.0f}',
-            'preempt peak V': f'{peak:.2f}'}
+            'preempt peak V': cells['preempt peak V'],
+            'preempt min bus V': cells['preempt min bus V'],
+            'preempt peak A': cells['preempt peak A']}
 
 
-COLUMNS = [column_path, column_trajectory, column_unshaped, column_full_voltage,
-           column_minimum_time,
-           column_preempted]
+COLUMNS = [column_path, column_trajectory, column_unshaped, column_no_reserve,
+           column_ideal_supply, column_minimum_time, column_preempted]
 
 
 def _heights(arm, q):
@@ -241,149 +304,93 @@ def _heights(arm, q):
     return np.minimum(elbow_y, elbow_y + fore * np.sin(q[:, 0] + q[:, 1]))
 
 
-# --- the minimum-time optimal control problem ----------------------------------------
-
-def casadi_derivative(arm: config.ArmConfig):
-    """f(x, u) of ``ArmDynamics.derivative`` in casadi: x = [θa, θb, ωa, ωb], u = [Va, Vb].
-
-    M θ̈ + C θ̇ + τg = τ_motor(V, θ̇) − τ_friction(θ̇) (Pedersen), the motors as GearMotor.
-    """
-    dynamics = ArmDynamics(arm)
-    upper, fore = arm.shoulder, arm.elbow
-    ma, mb = upper.mass_kg, fore.mass_kg
-    ra, rb, la = upper.com_from_joint_m, fore.com_from_joint_m, upper.length_m
-    g = arm.gravity_mps2
-    x, u = casadi.SX.sym('x', 4), casadi.SX.sym('u', 2)
-    qa, qb, wa, wb = x[0], x[1], x[2], x[3]
-    coupling = mb * la * rb * casadi.cos(qb)
-    m00 = (ma * ra ** 2 + mb * (la ** 2 + rb ** 2) + upper.inertia_about_com_kgm2
-           + fore.inertia_about_com_kgm2 + 2 * coupling)
-    m01 = mb * rb ** 2 + fore.inertia_about_com_kgm2 + coupling
-    m11 = mb * rb ** 2 + fore.inertia_about_com_kgm2
-    h = mb * la * rb * casadi.sin(qb)
-    coriolis = [-h * wb * wa - h * (wa + wb) * wb, h * wa * wa]
-    outer = g * mb * rb * casadi.cos(qa + qb)
-    gravity = [g * (ma * ra + mb * la) * casadi.cos(qa) + outer, outer]
-    net = []
-    for k, (joint, motor, w) in enumerate(zip(arm.joints, dynamics.motors, (wa, wb))):
-        motor_torque = (motor.gear_ratio * motor.kt_nm_per_a * motor.count
-                        * (u[k] - motor.gear_ratio * w / motor.kv_rad_per_s_per_v)
-                        / motor.resistance_ohm)
-        friction = (joint.viscous_friction_nm_s_per_rad * w
-                    + joint.coulomb_friction_nm * casadi.tanh(w / COULOMB_SMOOTHING_RAD_S))
-        net.append(motor_torque - friction - coriolis[k] - gravity[k])
-    det = m00 * m11 - m01 * m01
-    acc_a = (m11 * net[0] - m01 * net[1]) / det
-    acc_b = (m00 * net[1] - m01 * net[0]) / det
-    f = casadi.Function('f', [x, u], [casadi.vertcat(wa, wb, acc_a, acc_b)])
-    rng = np.random.default_rng(0)          # the two models must agree
-    for _ in range(20):
-        xs, us = rng.uniform(-3, 3, 4), rng.uniform(-12, 12, 2)
-        mismatch = np.max(np.abs(np.array(f(xs, us)).ravel()
-                                 - np.array(dynamics.derivative(list(xs), list(us)))))
-        assert mismatch < 1e-9, f'casadi model differs from ArmDynamics by {mismatch}'
-    return f
+def print_table(rows):
+    keys = list(dict.fromkeys(k for row in rows for k in row))
+    print('| ' + ' | '.join(keys) + ' |')
+    print('|' + '---|' * len(keys))
+    for row in rows:
+        print('| ' + ' | '.join(str(row.get(k, '')) for k in keys) + ' |')
 
 
-def _guess_from(trajectory, dynamics, max_voltage):
-    """An initial guess: the trajectory's states and clipped feedforward on 101 times."""
-    times = np.linspace(0.0, trajectory.duration_s, 101)
-    q, qd, _ = trajectory.sample_many(times)
-    volts = np.clip(trajectory_voltage(trajectory, dynamics, times), -max_voltage, max_voltage)
-    return {'time_s': trajectory.duration_s, 'fraction': times / trajectory.duration_s,
-            'state': np.hstack([q, qd]), 'voltage': volts}
+def _moves(arm, controller, count=None):
+    dynamics, forbidden = ArmDynamics(arm), ForbiddenSpace(arm)
+    limits = TrajectoryLimits.from_config(arm, controller)
+    for name, start_xy, goal_xy in SUITE[:count]:
+        move = Move(name, start_xy, goal_xy, arm, controller, dynamics, forbidden, limits)
+        plan_path(move)
+        yield move
 
 
-def _resample(guess, fractions):
-    state = np.column_stack([np.interp(fractions, guess['fraction'], guess['state'][:, k])
-                             for k in range(4)])
-    volts = np.column_stack([np.interp(fractions, guess['fraction'], guess['voltage'][:, k])
-                             for k in range(2)])
-    return state, volts
+# --- the what-if table: current limits ------------------------------------------------
+
+def with_current_limit(arm, limit_a):
+    return dataclasses.replace(arm, **{j.name: dataclasses.replace(j, current_limit_a=limit_a)
+                                       for j in arm.joints})
 
 
-def minimum_time(arm, start_q, goal_q, knots, guess):
-    """min T s.t. Hermite-Simpson collocation of f on ``knots`` intervals, |u| ≤ V_max,
-    floor, joint limits and elbow fold at knots and midpoints, rest at both ends."""
-    f = casadi_derivative(arm)
-    opti = casadi.Opti()
-    x = opti.variable(4, knots + 1)
-    u = opti.variable(2, knots + 1)
-    xm = opti.variable(4, knots)
-    um = opti.variable(2, knots)
-    duration = opti.variable()
-    h = duration / knots
-    fk = [f(x[:, k], u[:, k]) for k in range(knots + 1)]
-    for k in range(knots):
-        fm = f(xm[:, k], um[:, k])
-        opti.subject_to(xm[:, k] == 0.5 * (x[:, k] + x[:, k + 1]) + h / 8 * (fk[k] - fk[k + 1]))
-        opti.subject_to(x[:, k + 1] - x[:, k] == h / 6 * (fk[k] + 4 * fm + fk[k + 1]))
-    limit_v = arm.battery.nominal_voltage
-    fold = math.pi - arm.world.min_elbow_fold_rad
-    upper, fore = arm.shoulder.length_m, arm.elbow.length_m
-    for states, volts in ((x, u), (xm, um)):
-        opti.subject_to(opti.bounded(-limit_v, casadi.vec(volts), limit_v))
-        opti.subject_to(opti.bounded(arm.shoulder.min_angle_rad, states[0, :],
-                                     arm.shoulder.max_angle_rad))
-        opti.subject_to(opti.bounded(max(arm.elbow.min_angle_rad, -fold), states[1, :],
-                                     min(arm.elbow.max_angle_rad, fold)))
-        elbow_y = upper * casadi.sin(states[0, :])
-        opti.subject_to(elbow_y >= 0)
-        opti.subject_to(elbow_y + fore * casadi.sin(states[0, :] + states[1, :]) >= 0)
-    opti.subject_to(x[:, 0] == np.concatenate([start_q, [0.0, 0.0]]))
-    opti.subject_to(x[:, knots] == np.concatenate([goal_q, [0.0, 0.0]]))
-    opti.subject_to(opti.bounded(0.05, duration, 20.0))
-    opti.minimize(duration)
-
-    fractions = np.linspace(0.0, 1.0, knots + 1)
-    mids = 0.5 * (fractions[1:] + fractions[:-1])
-    state, volts = _resample(guess, fractions)
-    state_m, volts_m = _resample(guess, mids)
-    opti.set_initial(x, state.T)
-    opti.set_initial(u, volts.T)
-    opti.set_initial(xm, state_m.T)
-    opti.set_initial(um, volts_m.T)
-    opti.set_initial(duration, guess['time_s'])
-    opti.solver('ipopt', {'print_time': False},
-                {'print_level': 0, 'max_iter': 3000, 'tol': 1e-8, 'sb': 'yes'})
-    try:
-        solution = opti.solve()
-    except RuntimeError:
-        return None
-    x_value = np.array(solution.value(x)).T
-    u_value = np.array(solution.value(u)).T
-    return {'time_s': float(solution.value(duration)), 'fraction': fractions,
-            'state': x_value, 'voltage': u_value}
+def what_if(count=None):
+    """Per move and current limit: the timed trajectory against the electrical minimum."""
+    base, controller = config.load('controller')
+    rows = []
+    for move in _moves(base, controller, count):
+        row = {'move': move.name}
+        for limit in WHAT_IF_LIMITS_A:
+            arm = with_current_limit(base, limit)
+            label = f'{limit:.0f} A' if math.isfinite(limit) else 'none'
+            cells = [f'{label}: traj s / min s', f'{label}: ratio', f'{label}: bus V / A']
+            row.update(dict.fromkeys(cells, ''))
+            try:
+                trajectory = time_optimal_trajectory(
+                    move.waypoints, ArmDynamics(arm), move.forbidden,
+                    TrajectoryLimits.from_config(arm, controller))
+            except TrajectoryError:
+                # No minimum either: the same arm cannot hold itself along the path.
+                row[cells[0]] = 'cannot hold'
+                continue
+            times, _ = ocp.refined_minimum(arm, move.start_q, move.waypoints[-1],
+                                           ocp.guess_from(trajectory, arm), knots=(50, 100))
+            e = electrical(arm, trajectory)
+            row[cells[0]] = f'{trajectory.duration_s:.3f} / {times[-1]:.3f}'
+            row[cells[1]] = f'{trajectory.duration_s / times[-1]:.3f}'
+            row[cells[2]] = (f'{e["min_bus_v"]:.1f} / {e["peak_a"]:.0f}'
+                             + (' BROWNOUT' if e['brownout'] else ''))
+        rows.append(row)
+        print(' | '.join(f'{k}={v}' for k, v in row.items()), file=sys.stderr, flush=True)
+    print('Timed trajectory (the controller limits) against the electrical minimum '
+          '(direct collocation, 100 knots) at each per-motor current limit; bus V / A: the '
+          "trajectory's lowest bus voltage and peak motor current")
+    print_table(rows)
 
 
 # --- the table ------------------------------------------------------------------------
 
 def main(count=None):
     arm, controller = config.load('controller')
-    dynamics, forbidden = ArmDynamics(arm), ForbiddenSpace(arm)
-    limits = TrajectoryLimits.from_config(arm, controller)
     rows = []
-    for name, start_xy, goal_xy in SUITE[:count]:
-        move = Move(name, start_xy, goal_xy, arm, controller, dynamics, forbidden, limits)
-        plan_path(move)
-        row = {'move': name}
+    limits = None
+    for move in _moves(arm, controller, count):
+        limits = move.limits
+        row = {'move': move.name}
         for column in COLUMNS:
             row.update(column(move))
         rows.append(row)
         print(' | '.join(f'{k}={v}' for k, v in row.items()), file=sys.stderr, flush=True)
-    keys = list(dict.fromkeys(k for row in rows for k in row))
     print(f'trajectory limits: {limits.budget[0]:g} V driving, {limits.budget[1]:g} V '
-          f'braking, velocity {limits.max_velocity_rad_s} rad/s, acceleration '
-          f'{limits.max_acceleration_rad_s2} rad/s^2; minimum time at '
-          f'{arm.battery.nominal_voltage:g} V, '
-          'free path')
-    print('| ' + ' | '.join(keys) + ' |')
-    print('|' + '---|' * len(keys))
-    for row in rows:
-        print('| ' + ' | '.join(str(row.get(k, '')) for k in keys) + ' |')
+          f'braking at the nominal bus, velocity {limits.max_velocity_rad_s} rad/s, '
+          f'acceleration {limits.max_acceleration_rad_s2} rad/s^2, current limits '
+          f'{[j.current_limit_a for j in arm.joints]} A per motor; minimum time under the '
+          'same electrical limits (bus sag, current limits, brownout), free path')
+    print_table(rows)
     ratios = [float(r['traj/min']) for r in rows]
     print(f'traj/min: worst {max(ratios):.3f}, median {statistics.median(ratios):.3f}')
 
 
 if __name__ == '__main__':
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else None)
+    if '--what-if' in sys.argv:
+        what_if()
+    elif '--planning' in sys.argv:
+        from planning_time import planning, PLANNING_REPEATS
+        numbers = [a for a in sys.argv[1:] if a.isdigit()]
+        planning(int(numbers[0]) if numbers else PLANNING_REPEATS)
+    else:
+        main(int(sys.argv[1]) if len(sys.argv) > 1 else None)

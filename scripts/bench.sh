@@ -12,6 +12,10 @@ for name in ${1:-sim planner trajectory controller frc_bridge sysid}; do
   echo "== bench_$name"
   if [ "$name" = controller ]; then
     python "bench/bench_$name.py" --minimum
+  elif [ "$name" = trajectory ]; then
+    python bench/bench_trajectory.py
+    python bench/bench_trajectory.py --what-if
+    python bench/bench_trajectory.py --planning
   else
     python "bench/bench_$name.py"
   fi

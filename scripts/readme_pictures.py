@@ -22,9 +22,9 @@ import numpy as np
 
 from arm_control import config
 from arm_control.control.closed_loop import ClosedLoop
+from arm_control.logs.recording import Recording, Sample
 from arm_control.planning.planner import Planner
 from arm_control.visual.plots import plot_run
-from arm_control.visual.recording import Recording, Sample
 from arm_control.visual.scene import Scene
 from arm_control.visual.scene_view import SceneView
 

@@ -11,8 +11,8 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 import yaml
 
-from arm_control.visual.bag import (BagError, BagWriter, DEFINITION_DELIMITER, load_run,
-                                    message_definition, qos_duration)
+from arm_control.logs.bag import (BagError, BagWriter, DEFINITION_DELIMITER, load_run,
+                                  message_definition, qos_duration)
 from arm_control.visual.plots import main as plot_run_main
 
 STORE = get_typestore(Stores.ROS2_JAZZY)          # rosbags' own copies of the Jazzy types

@@ -24,6 +24,7 @@ MODULE_KEYS = {
     'launch_ros': 'launch_ros',
     'builtin_interfaces': 'builtin_interfaces',
     'rcl_interfaces': 'rcl_interfaces',
+    'rosgraph_msgs': 'rosgraph_msgs',
     'std_msgs': 'std_msgs',
     'std_srvs': 'std_srvs',
     'sensor_msgs': 'sensor_msgs',

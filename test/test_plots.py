@@ -8,8 +8,8 @@ from matplotlib import image
 import numpy as np
 import pytest
 
+from arm_control.logs.recording import Recording, Sample
 from arm_control.visual.plots import plot_run, state_spans, tracking_error
-from arm_control.visual.recording import Recording, Sample
 from arm_control.visual.scene import state_colour
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -5,9 +5,15 @@ import dataclasses
 from mcap_ros2.writer import Writer
 import numpy as np
 import pytest
+from rosbags.typesys import get_typestore, Stores
 
 from arm_control.sysid.fit import applied_voltage
-from arm_control.sysid.log import _msgdef, Log, LogWriter, read_log, write_log
+from arm_control.sysid.log import Log, LogWriter, read_log, write_log
+
+
+def _msgdef(type_name: str) -> str:
+    """The definition as another writer (rosbags) stores it, for bags not of our making."""
+    return get_typestore(Stores.ROS2_JAZZY).generate_msgdef(type_name, ros_version=2)[0]
 
 
 def a_log(rng) -> Log:

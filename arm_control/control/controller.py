@@ -67,6 +67,7 @@ class ArmController:
         self.goals = GoalRunner(arm, config, self.machine, self.events, self.setpoints)
         self.last_step_s: Optional[float] = None
         self.commanded_q: Optional[np.ndarray] = None    # the setpoint last commanded
+        self.resume_motion = None                         # the last motion back after 0 V
         self.estop_holding = False                        # e-stopped, holding (not at 0 V)
         self.voltage = self.feedforward_v = self.feedback_v = np.zeros(2)
         self.saturated = (0, 0)
@@ -283,13 +284,14 @@ class ArmController:
         self.goals.supervise(now_s, self.sensing.state)
 
     def _control(self, now_s: float, dt_s: float) -> np.ndarray:
-        """Feedforward at the setpoint plus PID on the estimate, clamped to the bus voltage."""
+        """Feedforward at the setpoint plus PID on the estimate, clamped to the bus voltage
+        (and to the battery's nominal volts, the command's range, while motors regenerate)."""
         if self.state == S.DRIVER:
             self.setpoints.driver.decide(now_s)
         self.setpoint = self._reference(now_s)
         # The voltage is held over the coming period: the feedforward keeps a model of the
         # arm on the trajectory at every period's end; the PID tracks that model.
-        bus = self.sensing.bus_voltage
+        bus = min(self.sensing.bus_voltage, self.arm.battery.nominal_voltage)
         feedforward = self.feedforward.step(now_s, self._reference, bus_voltage=bus)
         reference, estimate = self.feedforward.state, self.sensing.state
         error = reference[:2] - estimate[:2]
@@ -299,7 +301,9 @@ class ArmController:
         self.saturated = tuple(int(np.sign(v)) if abs(v) > bus else 0 for v in total)
         self.tracking_error_rad = error
         self.feedforward_v, self.feedback_v = feedforward, feedback
-        self.commanded_q = np.asarray(self.setpoint[0], float).copy()
+        back = self.resume_motion      # under way or braked, its end: not the sag it left
+        self.commanded_q = np.array(back.final_q if self.setpoints.in_charge(back, now_s)
+                                    else self.setpoint[0], float)
         return np.clip(total, -bus, bus)
 
     def _reference(self, t_s: float):
@@ -321,6 +325,7 @@ class ArmController:
     def _resume(self, now_s: float) -> str:
         """Take control back after 0 V (``SafetyRules.resume``); says what it does."""
         motion, what = self.safety.resume(now_s, self._rest_q().copy(), self.commanded_q)
+        self.resume_motion = motion
         self.setpoints.driving = False
         self.setpoints.schedule(motion)
         self.goals.goal_q = None

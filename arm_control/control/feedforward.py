@@ -1,16 +1,17 @@
-"""Feedforward for a voltage held over each control period, and the state to track.
+"""Feedforward for a voltage held over each control period, from the one model of the arm.
 
 A 50 Hz loop holds each command for 20 ms, while a time-optimal trajectory switches from
-driving to braking, and stops, at any instant: driven by the period's average voltage the arm
-ends the period off the trajectory (up to a degree on a short hop) and the PID has to catch
-it. Instead a model of the arm, the reference, is driven by the feedforward itself, and each
-period's voltage is the first of two -- one per period ahead, per joint -- that would put the
-reference exactly on the trajectory, position and velocity, two periods from now (four
-conditions, four volts: deadbeat; one Newton step from the Simpson average of the
+driving to braking, and stops, at any instant: driven by the period's average voltage the
+arm ends the period off the trajectory (up to a degree on a short hop) and the PID has to
+catch it. Instead a model of the arm, the reference, is driven by the feedforward itself,
+and each period's voltage is the first of two -- one per period ahead, per joint -- that
+would put the reference exactly on the trajectory, position and velocity, two periods from
+now (four conditions, four volts: deadbeat; one Newton step from the Simpson average of the
 trajectory's voltage over each period, the Jacobian by finite differences). The PID tracks
-the reference, a motion the arm can follow exactly. The reference restarts on the setpoint
-when it is more than ``restart_rad`` away (the setpoint jumped) or the loop paused for more
-than two periods.
+the reference, a motion the arm can follow exactly. The reference moves as the robot's
+motor controllers apply each held voltage (``PowerSupply.solve_many``: within the current
+limits and the bus it sags), so a command they lower moves the reference as it moves the
+arm; the Newton step itself is taken in the model alone.
 """
 
 import math
@@ -18,14 +19,22 @@ import math
 import numpy as np
 
 from arm_control.model.dynamics import ArmDynamics, rk4_batch
+from arm_control.model.electrical import PowerSupply
 
 
 class PeriodFeedforward:
-    """The deadbeat feedforward over ``ArmDynamics``' batch form."""
+    """The voltage to hold over each control period, and the reference state to track.
+
+    The reference restarts on the setpoint when it is more than ``restart_rad`` away (the
+    setpoint jumped) or the loop paused for more than two periods. The voltage is clamped to
+    ±``max_voltage``, or to the bus voltage when ``step`` is given one (what the motor
+    controllers can apply).
+    """
 
     def __init__(self, dynamics: ArmDynamics, period_s: float, max_voltage: float,
                  substep_s: float = 0.01, restart_rad: float = 0.05):
         self.dynamics = dynamics
+        self.supply = PowerSupply(dynamics.arm, dynamics.motors)
         self.period_s = float(period_s)
         self.max_voltage = float(max_voltage)
         self.substep_s = float(substep_s)
@@ -37,22 +46,31 @@ class PeriodFeedforward:
     def reset(self) -> None:
         self.state = None
 
-    def _simulate(self, x, volts, duration_s):
+    def _simulate(self, x, volts, duration_s, applied=True):
         """States (P, 4) after holding each of ``volts`` (P, k, 2) for ``duration_s`` in
-        turn, by RK4 on steps of at most ``substep_s``."""
+        turn, as the motor controllers apply them (``applied``; else as they are), by RK4
+        on steps of at most ``substep_s`` (``ArmDynamics.derivatives``)."""
         steps = max(1, math.ceil(duration_s / self.substep_s - 1e-9))
         h = duration_s / steps
         x = np.array(x, float)
+
+        def f(state, command):
+            _, volts_applied, _ = self.supply.solve_many(command, state[..., 2:])
+            return self.dynamics.derivatives(state, volts_applied)
+
         for k in range(volts.shape[1]):
             for _ in range(steps):
-                x = rk4_batch(self.dynamics.derivatives, x, volts[:, k], h)
+                x = rk4_batch(f if applied else self.dynamics.derivatives, x, volts[:, k], h)
         return x
 
-    def step(self, now_s: float, setpoint, bus_voltage: float = math.nan) -> np.ndarray:
-        """The voltage to hold from ``now_s``, within ±``bus_voltage`` (default the battery's
-        nominal volts); ``setpoint(t)`` -> (q, q̇, q̈) of the trajectory. Updates ``state``,
-        the reference at ``now_s``."""
+    def step(self, now_s: float, setpoint, bus_voltage: float | None = None) -> np.ndarray:
+        """The voltage to hold from ``now_s``; ``setpoint(t)`` -> (q, q̇, q̈) of the
+        trajectory; ``bus_voltage``: the bus the sim reports (V), the most the motor
+        controllers can apply. Updates ``state``, the reference at ``now_s``."""
         period = self.period_s
+        limit = self.max_voltage
+        if bus_voltage is not None and math.isfinite(bus_voltage) and bus_voltage > 0.0:
+            limit = min(limit, float(bus_voltage))
         q_sp, qd_sp, _ = setpoint(now_s)
         here = np.concatenate([q_sp, qd_sp])
         if self.state is not None and 0.0 < now_s - self.time_s <= 2.5 * period:
@@ -70,12 +88,15 @@ class PeriodFeedforward:
         delta = 0.5
         trials = np.tile(guess, (5, 1))
         trials[1:] += delta * np.eye(4)
-        ends = self._simulate(np.tile(self.state, (5, 1)), trials.reshape(5, 2, 2), period)
+        # The Newton step in the model alone: where the motor controllers would lower a
+        # command, its column of the Jacobian vanishes and the other joint's volts would be
+        # bent to make up for it through the coupling.
+        ends = self._simulate(np.tile(self.state, (5, 1)), trials.reshape(5, 2, 2), period,
+                              applied=False)
         jacobian = (ends[1:] - ends[0]).T / delta
         try:
             guess = guess - np.linalg.solve(jacobian, ends[0] - target)
         except np.linalg.LinAlgError:
             pass
-        limit = bus_voltage if math.isfinite(bus_voltage) else self.max_voltage
         self.voltage = np.clip(guess[:2], -limit, limit)
         return self.voltage.copy()

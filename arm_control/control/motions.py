@@ -202,6 +202,12 @@ class Setpoints:
     def hold(self, q, now_s: float) -> None:
         self.timeline.schedule(Motion(HoldTrajectory(q), now_s))
 
+    def in_charge(self, motion: Optional[Motion], now_s: float) -> bool:
+        """Whether ``motion``, or the braking of it, gives the setpoint at ``now_s``."""
+        active = None if self.driving else self.timeline.at(now_s)
+        return motion is not None and active is not None and (
+            active is motion or getattr(active, 'base', None) is motion)
+
     def drive(self, now_s: float, q, qd) -> None:
         """The driver takes over from the setpoint (q, q̇) being followed now."""
         self.driver.take_over(now_s, q, qd)

@@ -17,6 +17,8 @@ brownout voltage every output is 0 V (and the bus returns to V_nominal).
 from dataclasses import dataclass
 import math
 
+import numpy as np
+
 from arm_control.config import ArmConfig
 from arm_control.model.motor import GearMotor
 
@@ -51,6 +53,10 @@ class PowerSupply:
         # Volts either side of the back-EMF that drive the current limit through one motor.
         self.current_window_v = tuple(limit * motor.resistance_ohm
                                       for limit, motor in zip(self.current_limit_a, motors))
+        # ... and the same as arrays, for the batch forms.
+        self._window_v = np.array(self.current_window_v)
+        self._emf_v_per_rad_s = np.array([m.back_emf_v_per_rad_s for m in motors])
+        self._conductance = np.array([m.count / m.resistance_ohm for m in motors])
 
     def applied_at(self, command_v, speed_rad_s, bus_voltage: float) -> tuple[float, float]:
         """What the motor controllers apply for ``command_v`` at a known bus voltage (the
@@ -109,6 +115,59 @@ class PowerSupply:
         currents = tuple(motor.current_a(0.0, speed)
                          for motor, speed in zip(self.motors, speed_rad_s))
         return PowerState(self.nominal_voltage, (0.0, 0.0), currents, 0.0, True)
+
+    def applied_voltages(self, command_v, speed_rad_s, bus_voltage) -> np.ndarray:
+        """The batch form of ``applied_at``: commands and joint speeds of shape (..., 2), at
+        a known bus voltage."""
+        emf = self._emf_v_per_rad_s * speed_rad_s
+        return np.clip(np.clip(command_v, emf - self._window_v, emf + self._window_v),
+                       -bus_voltage, bus_voltage)
+
+    def solve_many(self, command_v, speed_rad_s):
+        """The batch form of ``solve``: commands and joint speeds of shape (..., 2); returns
+        (bus voltage (...), applied volts (..., 2), browned out (...)). The same intervals:
+        neither joint capped by the bus (tried first: the usual case), the one with the
+        larger command, or both."""
+        command_v, speed_rad_s = np.asarray(command_v, float), np.asarray(speed_rad_s, float)
+        nominal, r_battery = self.nominal_voltage, self.resistance_ohm
+        emf = self._emf_v_per_rad_s * speed_rad_s
+        free = np.clip(command_v, emf - self._window_v, emf + self._window_v)
+        size = np.abs(free)
+        high = np.max(size, axis=-1)
+        with np.errstate(invalid='ignore'):
+            bus = 0.5 * (nominal + np.sqrt(nominal * nominal - 4.0 * r_battery * np.sum(
+                self._conductance * free * (free - emf), axis=-1)))
+            if not np.all(bus >= high):
+                bus = np.where(bus >= high, bus, np.nan)
+                low = np.min(size, axis=-1)
+                for lower, upper in ((low, high), (np.zeros_like(low), low)):
+                    capped = size > lower[..., None]
+                    g = np.where(capped, self._conductance, 0.0)
+                    a = 1.0 + r_battery * np.sum(g, axis=-1)
+                    b = r_battery * np.sum(-g * np.sign(free) * emf, axis=-1) - nominal
+                    drawn = np.where(capped, 0.0, self._conductance * free * (free - emf))
+                    c = r_battery * np.sum(drawn, axis=-1)
+                    root = (-b + np.sqrt(b * b - 4.0 * a * c)) / (2.0 * a)
+                    bus = np.where(np.isnan(bus) & (lower <= root) & (root <= upper), root,
+                                   bus)
+        browned = ~(bus >= self.brownout_voltage)
+        bus = np.where(browned, nominal, bus)
+        cap = bus[..., None]
+        applied = np.where(browned[..., None], 0.0, np.clip(free, -cap, cap))
+        return bus, applied, browned
+
+    def bus_voltages(self, applied_v, speed_rad_s) -> np.ndarray:
+        """The batch form of the bus for voltages the motor controllers apply as commanded
+        (within the current limits and ±V_bus: ``solve`` then lowers nothing and gives the
+        same bus): applied_v and speed_rad_s of shape (..., 2), the bus (...,), the upper
+        root of V_bus² − V_nominal·V_bus + R_battery·P = 0 with P = Σ n·V·(V − e·ω)/R. NaN
+        where there is none: the battery cannot give that power at any voltage."""
+        applied_v, speed_rad_s = np.asarray(applied_v, float), np.asarray(speed_rad_s, float)
+        power = np.sum(self._conductance * applied_v
+                       * (applied_v - self._emf_v_per_rad_s * speed_rad_s), axis=-1)
+        discriminant = self.nominal_voltage ** 2 - 4.0 * self.resistance_ohm * power
+        with np.errstate(invalid='ignore'):
+            return 0.5 * (self.nominal_voltage + np.sqrt(discriminant))
 
     def min_bus_voltage(self) -> float:
         """The lowest bus voltage the current limits allow: with |V| ≤ V_bus each motor's

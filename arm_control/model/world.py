@@ -6,8 +6,13 @@ the whole segment, not only at its ends -- lies inside a forbidden rectangle gro
 ``clearance_m``. With a ``margin_rad``, so is every configuration within that of one on
 both joints: a joint-space margin, since a Cartesian one cannot hold for a shoulder pivot on
 the floor's edge. Everything works on arrays of configurations at once.
+
+Checks along paths ask about many configurations near each other, again and again, and most
+are far from any forbidden region: ``FreeCells`` remembers the joint-space cells proved free
+as a whole, so that only the configurations in the others get the exact check.
 """
 
+import functools
 import math
 
 import numpy as np
@@ -32,6 +37,91 @@ def segments_hit_rectangle(x0, y0, x1, y1, rect) -> np.ndarray:
     return t_enter <= t_leave
 
 
+class FreeCells:
+    """Cells of joint space in which every configuration is free, found tile by tile as
+    checks reach them.
+
+    A cell of half-width h around c is free as a whole when the joints stay inside their
+    limits (and the fold) across it, the upper arm's sweep misses every forbidden rectangle
+    -- its segments for shoulder angles in [c − h, c + h] lie in the triangle of the pivot
+    and the two ends pushed out by 1/cos h (the chord between them touches the arc) -- and
+    the forearm at c misses every rectangle grown by δ = (L_upper + 2·L_fore)·h: across the
+    cell no point of it moves more than L_upper·h + L_fore·2h.
+    """
+
+    HALF_WIDTH_RAD = math.radians(0.25)
+    TILE = 16                          # cells a side, proved together
+
+    def __init__(self, arm: ArmConfig):
+        h = self.HALF_WIDTH_RAD
+        self.space = ForbiddenSpace(arm)
+        self.grown = ForbiddenSpace(arm, grow_m=(arm.shoulder.length_m
+                                                 + 2.0 * arm.elbow.length_m) * h)
+        self.cell_rad = 2.0 * h
+        self.low = self.space.limits[:, 0]
+        self.counts = np.ceil((self.space.limits[:, 1] - self.low) / self.cell_rad).astype(int)
+        self.free = np.zeros(self.counts, dtype=bool)
+        self.tiles_done = np.zeros(-(-self.counts // self.TILE), dtype=bool)
+
+    def contain(self, q) -> np.ndarray:
+        """Whether each configuration of q (N, 2) lies in a cell proved free."""
+        index = np.floor((q - self.low) / self.cell_rad).astype(np.int64)
+        inside = np.all((index >= 0) & (index < self.counts), axis=-1)
+        index = np.where(inside[:, None], index, 0)
+        tiles = index // self.TILE
+        new = inside & ~self.tiles_done[tiles[:, 0], tiles[:, 1]]
+        if np.any(new):
+            for tile in np.unique(tiles[new], axis=0):
+                self._prove(*tile)
+        return inside & self.free[index[:, 0], index[:, 1]]
+
+    def _prove(self, ti: int, tj: int) -> None:
+        rows = np.arange(ti * self.TILE, min((ti + 1) * self.TILE, self.counts[0]))
+        columns = np.arange(tj * self.TILE, min((tj + 1) * self.TILE, self.counts[1]))
+        i, j = np.meshgrid(rows, columns, indexing='ij')
+        centres = self.low + (np.stack([i, j], axis=-1) + 0.5) * self.cell_rad
+        h = self.HALF_WIDTH_RAD * (1.0 + 1e-6)
+        space = self.space
+        within = (np.all((centres - h >= space.limits[:, 0])
+                         & (centres + h <= space.limits[:, 1]), axis=-1)
+                  & (np.abs(centres[..., 1]) + h <= space.max_elbow_fold_rad))
+        shoulder = centres[:, 0, 0]
+        reach = space.upper_m / math.cos(h)
+        ends = [(reach * np.cos(shoulder + side), reach * np.sin(shoulder + side))
+                for side in (-h, h)]
+        zero = np.zeros_like(shoulder)
+        sweep_hits = np.zeros(len(shoulder), dtype=bool)
+        for _, rect in space.rectangles:
+            for x0, y0, x1, y1 in ((zero, zero, *ends[0]), (zero, zero, *ends[1]),
+                                   (*ends[0], *ends[1])):
+                sweep_hits |= segments_hit_rectangle(x0, y0, x1, y1, rect)
+            sweep_hits |= _in_triangle(rect[0], rect[1], (zero, zero), *ends)
+        _, forearm = self.grown._links(centres)
+        forearm_hits = np.zeros(centres.shape[:-1], dtype=bool)
+        for _, rect in self.grown.rectangles:
+            forearm_hits |= segments_hit_rectangle(*forearm, rect)
+        self.free[i, j] = within & ~sweep_hits[:, None] & ~forearm_hits
+        self.tiles_done[ti, tj] = True
+
+
+def _in_triangle(x, y, a, b, c) -> np.ndarray:
+    """Whether the point (x, y) lies in each triangle abc (corners as (xs, ys) arrays)."""
+    def side(p, q):
+        return (q[0] - p[0]) * (y - p[1]) - (q[1] - p[1]) * (x - p[0])
+    d1, d2, d3 = side(a, b), side(b, c), side(c, a)
+    return ~(((d1 < 0) | (d2 < 0) | (d3 < 0)) & ((d1 > 0) | (d2 > 0) | (d3 > 0)))
+
+
+@functools.lru_cache(maxsize=16)
+def free_cells(arm: ArmConfig) -> FreeCells:
+    """The one ``FreeCells`` of each arm, shared by every check of it."""
+    return FreeCells(arm)
+
+
+# Checks of fewer configurations than this go through ``FreeCells``; a bigger batch (a
+# planner's whole grid) is checked outright, without proving every tile on the way.
+_CELLS_UP_TO = 20_000
+
 # Where ``clear_by`` looks: the corners and edge midpoints of a square of half-width 1.
 _SQUARE = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0],
                     [1.0, 1.0], [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0], [0.0, 0.0]])
@@ -40,17 +130,21 @@ _SQUARE = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0],
 class ForbiddenSpace:
     """The arm's forbidden configurations, from its links, limits and world."""
 
-    def __init__(self, arm: ArmConfig, margin_rad: float = 0.0):
+    def __init__(self, arm: ArmConfig, margin_rad: float = 0.0, grow_m: float = 0.0):
         self.arm = arm
         self.margin_rad = margin_rad
         self.upper_m = arm.shoulder.length_m
         self.fore_m = arm.elbow.length_m
         # Touching a region's edge is allowed (the shoulder pivot sits on the floor's):
         # only the open interior is forbidden, so test against a rectangle a hair smaller.
-        grow = arm.world.clearance_m - 1e-9
+        # (``grow_m``: grown further, for ``FreeCells``' proofs.)
+        grow = arm.world.clearance_m - 1e-9 + grow_m
+        self._proves_cells = grow_m > 0.0
+        self._cells = None
         self.rectangles = [
             (r.name, (r.x_min - grow, r.y_min - grow, r.x_max + grow, r.y_max + grow))
             for r in arm.world.regions]
+        self._bounds = np.array([rect for _, rect in self.rectangles]).T    # 4 × regions
         self.limits = np.array([[j.min_angle_rad, j.max_angle_rad] for j in arm.joints])
         self.max_elbow_fold_rad = math.pi - arm.world.min_elbow_fold_rad
         self.check_step_rad = arm.world.check_step_rad
@@ -70,12 +164,15 @@ class ForbiddenSpace:
                 & (np.abs(q[..., 1]) <= self.max_elbow_fold_rad))
 
     def collides(self, q) -> np.ndarray:
-        """Whether a point of either link lies in a forbidden rectangle (limits aside)."""
+        """Whether a point of either link lies in a forbidden rectangle (limits aside): every
+        rectangle at once, along a last axis."""
         q = np.asarray(q, dtype=float)
         hit = np.zeros(q.shape[:-1], dtype=bool)
+        if not self.rectangles:
+            return hit
         for link in self._links(q):
-            for _, rect in self.rectangles:
-                hit |= segments_hit_rectangle(*link, rect)
+            hit |= np.any(segments_hit_rectangle(*(end[..., None] for end in link),
+                                                 self._bounds), axis=-1)
         return hit
 
     def is_free(self, q) -> np.ndarray | bool:
@@ -84,7 +181,18 @@ class ForbiddenSpace:
 
     def _free(self, q) -> np.ndarray | bool:
         q = np.asarray(q, dtype=float)
-        free = self.within_limits(q) & ~self.collides(q)
+        flat = q.reshape(-1, 2)
+        if self._proves_cells or len(flat) > _CELLS_UP_TO:
+            free = self.within_limits(flat) & ~self.collides(flat)
+        else:
+            if self._cells is None:
+                self._cells = free_cells(self.arm)
+            free = self._cells.contain(flat)
+            rest = ~free
+            if np.any(rest):
+                others = flat[rest]
+                free[rest] = self.within_limits(others) & ~self.collides(others)
+        free = free.reshape(q.shape[:-1])
         return bool(free) if free.ndim == 0 else free
 
     def why_forbidden(self, q) -> str | None:

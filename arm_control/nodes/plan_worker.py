@@ -18,6 +18,7 @@ import threading
 
 from arm_control.config import ArmConfig
 from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
+from arm_control.control.trajectory.moving_start import toppra_solver
 
 
 def _serve(requests: Connection, results: Connection) -> None:
@@ -36,6 +37,9 @@ def _serve(requests: Connection, results: Connection) -> None:
             timer = PlanTimer(*item)
             if first:
                 results.send(None)                      # ready
+                # The moving-start solver's import (0.8 s) done meanwhile, not at the first
+                # goal that preempts another.
+                threading.Thread(target=toppra_solver, daemon=True).start()
             continue
         request, plan = item
         try:

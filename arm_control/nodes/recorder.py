@@ -19,9 +19,9 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, String
 
 from arm_control.config import RecorderConfig
+from arm_control.logs.bag import BagError, BagWriter, qos_duration
 from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, STATE_STREAM
 from arm_control.parameters import ParameterError
-from arm_control.visual.bag import BagError, BagWriter, qos_duration
 
 # Best effort matches a publisher of either reliability: the sim's electrical topics are
 # recorded whichever QoS it gives them.

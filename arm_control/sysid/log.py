@@ -13,7 +13,6 @@ the fit's instruments) and, when the robot publishes it, ``/battery_state``
 """
 
 from dataclasses import dataclass, field
-import functools
 import math
 from pathlib import Path
 
@@ -23,6 +22,7 @@ from mcap_ros2.writer import Writer
 import numpy as np
 
 from arm_control.config import JOINT_NAMES
+from arm_control.logs.bag import message_definition
 
 JOINT_STATES = 'joint_states'
 VOLTAGE_COMMAND = 'voltage_command'
@@ -67,14 +67,6 @@ class Log:
             else 0.0
 
 
-@functools.lru_cache(maxsize=None)
-def _msgdef(type_name: str) -> str:
-    """The full definition rosbag2 stores for a type (its fields, then each nested type)."""
-    from rosbags.typesys import get_typestore, Stores
-    text, _ = get_typestore(Stores.ROS2_JAZZY).generate_msgdef(type_name, ros_version=2)
-    return text
-
-
 def _stamp(time_s: float) -> dict:
     nanoseconds = int(round(time_s * 1e9))
     return {'sec': nanoseconds // 1_000_000_000, 'nanosec': nanoseconds % 1_000_000_000}
@@ -94,9 +86,10 @@ class LogWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, 'wb')
         self._writer = Writer(self._file)
-        self._schemas = {kind: self._writer.register_msgdef(name.replace('/msg/', '/'),
-                                                            _msgdef(name))
-                         for kind, (_, name) in _TOPICS.items()}
+        self._schemas = {}
+        for kind, (_, name) in _TOPICS.items():
+            short = name.replace('/msg/', '/')
+            self._schemas[kind] = self._writer.register_msgdef(short, message_definition(short))
         self._sequence = 0
 
     def _write(self, kind, message, time_s):

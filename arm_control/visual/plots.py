@@ -15,8 +15,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 import numpy as np
 
-from arm_control.visual.bag import BagError, load_run
-from arm_control.visual.recording import Recording
+from arm_control.logs.bag import BagError, load_run
+from arm_control.logs.recording import Recording
 from arm_control.visual.scene import state_colour
 
 JOINT_COLOURS = ('#1971c2', '#e8590c')          # shoulder, elbow

@@ -29,7 +29,7 @@ from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
 from mcap_ros2.decoder import DecoderFactory
 import yaml
 
-from arm_control.visual.recording import Recording
+from arm_control.logs.recording import Recording
 
 ROSBAG2_VERSION = 9                 # rosbag2_storage::BagMetadata::version in Jazzy
 NEVER_NS = 2 ** 63 - 1              # rosbag2's starting time of a bag with no message

@@ -1,0 +1,166 @@
+"""The exact time-optimal timing of paths that start from rest (or a given path speed) and
+end at rest, back-EMF kept exactly: the closed-form backward and forward passes of the
+classical time-optimal parameterisation on a grid, for many paths at once (the shape search)
+or one (plain floats: several times faster than numpy for a single path).
+"""
+
+import math
+
+import numpy as np
+
+
+def first_positive_root(alpha, beta, gamma):
+    """The least y > 0 with α·y² + β·y + γ = 0, for γ ≥ 0 (α·y² + β·y + γ ≥ 0 on [0, y]);
+    inf when there is none, 0 when γ < 0. Written y = 2γ/(√(β² − 4αγ) − β): no cancellation,
+    and it covers α = 0."""
+    with np.errstate(divide='ignore', invalid='ignore'):
+        denominator = np.sqrt(beta * beta - 4.0 * alpha * gamma) - beta
+        root = np.where(denominator > 0.0, 2.0 * gamma / denominator, np.inf)
+    return np.where(gamma < 0.0, 0.0, root)
+
+
+def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
+    """The fastest path speeds ṡ (K, n) along K paths sampled on one grid, from
+    ``start_speed`` to rest at the end; NaN rows where the start speed is out of reach.
+
+    Rows A·u + B·x + C + D·y within ±W (``rows.rows``; A, B, C, D of shape (K, n, rows)),
+    ``top`` (K, n) the speed caps, ``steps`` (n−1,) the grid's stages in σ. The term D·y
+    (back-EMF, viscous friction) is kept exactly, not linearised: u is held over each stage
+    and the rows are imposed at both its ends (as TOPP-RA's interpolation), so every bound
+    is a quadratic in y. For rows j, m with s = sign(A), some u fits both iff
+    W_j|A_m| + W_m|A_j| + s_j|A_m|·r_j − s_m|A_j|·r_m ≥ 0 (r = B·x + C + D·y): the top speed
+    (maximum velocity curve) is the first root over all pairs, and the speed caps. Backward
+    from rest, y_i is the largest y with y² − 2Δ·(W_j + s_j·r_j)/|A_j| ≤ y²ᵢ₊₁ for every row
+    at both ends (braking as hard as the rows allow); forward from the start, accelerate as
+    hard as they allow at both ends, under that curve.
+    """
+    sign = np.where(A >= 0.0, 1.0, -1.0)
+    size = np.abs(A)
+    j, m = np.nonzero(~np.eye(len(W), dtype=bool))             # every ordered pair of rows
+    left, right = sign[..., j] * size[..., m], sign[..., m] * size[..., j]
+    top = np.minimum(top, np.min(first_positive_root(
+        left * B[..., j] - right * B[..., m], left * D[..., j] - right * D[..., m],
+        W[j] * size[..., m] + W[m] * size[..., j] + left * C[..., j] - right * C[..., m]),
+        axis=-1))
+    count, stages = A.shape[0], A.shape[1]
+    twice = 2.0 * np.asarray(steps, float)                        # 2Δ per stage
+    # Stage-major copies (n, K, rows): each step below reads contiguous memory.
+    A, B, C, D, sign, size = (np.ascontiguousarray(np.moveaxis(v, 1, 0))
+                              for v in (A, B, C, D, sign, size))
+    top = np.ascontiguousarray(top.T)
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        inverse = np.where(size > 1e-12, 1.0 / size, 0.0)
+        unbounded = np.where(size > 1e-12, 0.0, np.inf)
+        # Stage i's u at its start (x_i) and at its end (x_i+1 = x_i + 2Δu): y² − x_i = 2Δu.
+        stage = twice[:, None, None]
+        start_alpha = stage * sign[:-1] * B[:-1] - size[:-1]
+        start_beta = stage * sign[:-1] * D[:-1]
+        start_beta_squared = start_beta ** 2
+        start_gamma = stage * (W + sign[:-1] * C[:-1])
+        end_alpha = -(size[1:] + stage * sign[1:] * B[1:])
+        end_beta = -stage * sign[1:] * D[1:]
+        end_beta_squared = end_beta ** 2
+        end_gamma = stage * (W - sign[1:] * C[1:])
+        if count == 1:      # one path: plain floats are several times faster than numpy
+            slope_x = -sign * B * inverse         # the s̈ bound: slope_x·x + slope_y·y + ...
+            slope_y = -sign * D * inverse
+            brake = np.where(size > 1e-12, -(W + sign * C) * inverse, -np.inf)
+            push = np.where(size > 1e-12, (W - sign * C) * inverse, np.inf)
+            backward = np.stack([slope_x[1:], slope_y[1:], brake[1:], start_alpha, start_beta,
+                                 start_gamma, size[:-1]], axis=-1)[:, 0]
+            forward = np.stack([slope_x[:-1], slope_y[:-1], push[:-1], end_alpha, end_beta,
+                                end_gamma, size[1:]], axis=-1)[:, 0]
+            speed, ceiling = _passes_one_path(backward.tolist(), forward.tolist(),
+                                              top[:, 0].tolist(), twice.tolist(),
+                                              float(start_speed))
+            return np.where(start_speed > ceiling[0] * (1.0 + 1e-9) + 1e-12, np.nan,
+                            np.array(speed))[None]
+        ceiling = np.zeros((stages, count))
+        for i in range(stages - 2, -1, -1):
+            y = ceiling[i + 1]
+            column = y[:, None]
+            r = (B[i + 1] * column + D[i + 1]) * column + C[i + 1]
+            brake = np.max(-(W + sign[i + 1] * r) * inverse[i + 1] - unbounded[i + 1], axis=1)
+            gamma = start_gamma[i] + size[i] * (y * y)[:, None]
+            denominator = np.sqrt(start_beta_squared[i] - 4.0 * start_alpha[i] * gamma) \
+                - start_beta[i]
+            root = np.min(np.where(denominator > 0.0, 2.0 * gamma / denominator, np.inf), axis=1)
+            ceiling[i] = np.minimum(np.minimum(top[i], root),
+                                    np.sqrt(np.maximum(y * y - twice[i] * brake, 0.0)))
+        speed = np.zeros((stages, count))
+        speed[0] = start_speed
+        for i in range(stages - 1):
+            y = speed[i]
+            column = y[:, None]
+            r = (B[i] * column + D[i]) * column + C[i]
+            push = np.min((W - sign[i] * r) * inverse[i] + unbounded[i], axis=1)
+            gamma = end_gamma[i] + size[i + 1] * (y * y)[:, None]
+            denominator = np.sqrt(end_beta_squared[i] - 4.0 * end_alpha[i] * gamma) \
+                - end_beta[i]
+            at_end = np.min(np.where(denominator > 0.0, 2.0 * gamma / denominator, np.inf),
+                            axis=1)
+            speed[i + 1] = np.minimum(np.sqrt(np.clip(np.minimum(
+                y * y + twice[i] * push, ceiling[i + 1] ** 2), 0.0, None)), at_end)
+    speed, ceiling = speed.T.copy(), ceiling.T
+    speed[start_speed > ceiling[:, 0] * (1.0 + 1e-9) + 1e-12] = np.nan
+    return speed
+
+
+def _passes_one_path(backward, forward, top, twice, start_speed):
+    """``fastest_speeds``' backward and forward passes for one path, on floats. Per stage and
+    row: the s̈ bound's slopes in x and y and its constant (braking at the stage's end for
+    the backward pass, driving at its start for the forward one), then α, β, γ and |A| of
+    the quadratic that bounds the speed at the stage's other end."""
+    stages = len(top)
+    sqrt, inf = math.sqrt, math.inf
+    ceiling = [0.0] * stages
+    for i in range(stages - 2, -1, -1):
+        y = ceiling[i + 1]
+        x = y * y
+        bound = top[i]
+        brake = -inf
+        for slope_x, slope_y, constant, alpha, beta, gamma, size in backward[i]:
+            value = slope_x * x + slope_y * y + constant
+            if value > brake:
+                brake = value
+            gamma += size * x
+            discriminant = beta * beta - 4.0 * alpha * gamma
+            if discriminant >= 0.0:
+                denominator = sqrt(discriminant) - beta
+                if denominator > 0.0 and 2.0 * gamma < bound * denominator:
+                    bound = 2.0 * gamma / denominator
+        slowest = x - twice[i] * brake
+        slowest = sqrt(slowest) if slowest > 0.0 else 0.0
+        ceiling[i] = bound if bound < slowest else slowest
+    speed = [0.0] * stages
+    speed[0] = start_speed
+    for i in range(stages - 1):
+        y = speed[i]
+        x = y * y
+        push = inf
+        reach = ceiling[i + 1]
+        for slope_x, slope_y, constant, alpha, beta, gamma, size in forward[i]:
+            value = slope_x * x + slope_y * y + constant
+            if value < push:
+                push = value
+            gamma += size * x
+            discriminant = beta * beta - 4.0 * alpha * gamma
+            if discriminant >= 0.0:
+                denominator = sqrt(discriminant) - beta
+                if denominator > 0.0 and 2.0 * gamma < reach * denominator:
+                    reach = 2.0 * gamma / denominator
+        fastest = x + twice[i] * push
+        top_next = ceiling[i + 1] * ceiling[i + 1]
+        if fastest > top_next:
+            fastest = top_next
+        fastest = sqrt(fastest) if fastest > 0.0 else 0.0
+        speed[i + 1] = fastest if fastest < reach else reach
+    return speed, ceiling
+
+
+def durations(steps, speeds):
+    """Σ 2Δ/(ṡ_i + ṡ_i+1) per row; inf where the speed stalls (or is NaN)."""
+    mean = speeds[:, 1:] + speeds[:, :-1]
+    stalls = ~np.all(mean > 0.0, axis=1)
+    return np.where(stalls, np.inf, np.sum(2.0 * np.asarray(steps) / np.where(
+        stalls[:, None], 1.0, mean), axis=1))

@@ -1,0 +1,133 @@
+"""Bending the planner's path where that is faster: a batched search over sine bends.
+
+The planner's path is short, not fast: the fastest motion often folds the elbow on the way
+(less inertia and gravity torque at the shoulder) or lets one joint lead. The path is bent
+by Σₕ aₕ·sin(hπσ/L) on each joint, and a pattern search over the first ``_HARMONICS``
+harmonics times many shapes at once (``exact.fastest_speeds`` on a coarse grid, under the
+bus sag of the unbent path). A shape counts only when its samples are free and, where the
+planner's path has ``_ROOM_M`` of room to spare around forbidden regions, keep that room (for
+tracking errors); the one chosen is then checked at the world's check step.
+"""
+
+import dataclasses
+import functools
+import itertools
+import math
+
+import numpy as np
+
+from arm_control.config import ArmConfig
+from arm_control.control.trajectory.bus import under_the_bus
+from arm_control.control.trajectory.exact import durations, fastest_speeds
+from arm_control.control.trajectory.limits import TrajectoryLimits
+from arm_control.control.trajectory.path import (BlendedPath, clustered, forbidden_at,
+                                                 shape_terms)
+from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
+from arm_control.model.dynamics import ArmDynamics
+from arm_control.model.world import ForbiddenSpace
+
+# Harmonics per joint, the first batch's grid (per joint, odd: it holds 0) and span (± this
+# times the path length), the refinement steps (times the length) and how many of them try
+# every combination (the rest one amplitude at a time), the stages the shapes are timed on,
+# the room kept, the least gain worth a new shape, and the shortest move worth the search
+# (on a shorter one a few percent is less than the search's own time).
+_HARMONICS = 2
+_GRID = 5
+_SPAN = 0.35
+_STEPS = (0.06, 0.03, 0.015)
+_FULL_STEPS = 3
+SEARCH_STAGES = 20
+_ROOM_M = 0.03
+_MIN_GAIN = 0.01
+_MIN_DURATION_S = 0.25
+
+
+@functools.lru_cache(maxsize=8)
+def _with_room(arm: ArmConfig) -> ForbiddenSpace:
+    """Forbidden space with every region grown by ``_ROOM_M`` more."""
+    world = dataclasses.replace(arm.world, clearance_m=arm.world.clearance_m + _ROOM_M)
+    return ForbiddenSpace(dataclasses.replace(arm, world=world))
+
+
+def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: TrajectoryLimits):
+    """(amplitudes (H, 2) of the bend Σₕ aₕ·sin(hπσ/L) that make the path fastest, or
+    zeros; the (σ, sag) of the unbent path's bus, or None).
+
+    A grid of the first harmonic's amplitudes, then ``_STEPS`` refinements over every
+    combination of ±step; each batch timed at once.
+    """
+    zeros = np.zeros((_HARMONICS, 2))
+    base = BlendedPath(points, radii)
+    length = base.length
+    grid = clustered(length, SEARCH_STAGES)
+    fraction = grid / length
+    q0, dq0, ddq0 = base(grid), base(grid, 1), base(grid, 2)
+    steps = np.diff(grid)
+
+    def timed(terms, sag_v):
+        A, B, C, D, W = rows(terms, limits, sag_v)
+        return fastest_speeds(A, B, C, D, W, speed_caps(limits, terms.dq), steps)
+
+    one = PathTerms(dynamics, q0[None], dq0[None], ddq0[None])
+
+    def unshaped(sag_v):
+        speed = timed(one, sag_v)[0]
+        return speed ** 2 if np.all(np.isfinite(speed)) else None
+
+    x, sag = under_the_bus(unshaped, PathTerms(dynamics, q0, dq0, ddq0), limits, grid)
+    if x is None:
+        return zeros, None
+    bus = None if limits.supply is None else (grid, sag)
+    unshaped_s = float(durations(steps, np.sqrt(x)[None])[0])
+    if not unshaped_s >= _MIN_DURATION_S:
+        return zeros, bus                          # a hop: the search would cost more
+    roomy = _with_room(forbidden.arm)
+    base_roomy = np.asarray(roomy.is_free(q0), dtype=bool)
+
+    def search(shapes):
+        q = q0 + shape_terms(fraction, shapes, 0)
+        dq = dq0 + shape_terms(fraction, shapes, 1) / length
+        ddq = ddq0 + shape_terms(fraction, shapes, 2) / length ** 2
+        # Free with room where the planner's path has room, free elsewhere (room ⇒ free).
+        ok = np.asarray(roomy.is_free(q.reshape(-1, 2)), dtype=bool).reshape(q.shape[:2])
+        tight = ~ok & ~base_roomy
+        if np.any(tight):
+            ok[tight] = np.asarray(forbidden.is_free(q[tight]), dtype=bool)
+        ok = np.all(ok, axis=1)
+        out = np.full(len(shapes), np.inf)
+        if np.any(ok):
+            speeds = timed(PathTerms(dynamics, q[ok], dq[ok], ddq[ok]), sag)
+            out[ok] = durations(steps, speeds)
+        return out
+
+    levels = np.linspace(-_SPAN, _SPAN, _GRID) * length
+    batch = np.zeros((_GRID ** 2, _HARMONICS, 2))
+    batch[:, 0, 0], batch[:, 0, 1] = (axis.ravel() for axis in np.meshgrid(levels, levels))
+    times = search(batch)
+    best, best_s = zeros, unshaped_s
+    if np.min(times) < best_s:
+        best, best_s = batch[int(np.argmin(times))], float(np.min(times))
+    every = np.array(list(itertools.product((-1.0, 0.0, 1.0), repeat=2 * _HARMONICS)))
+    every = every.reshape(-1, _HARMONICS, 2)
+    axes = every[np.sum(np.abs(every), axis=(1, 2)) <= 1.0]
+    for index, step in enumerate(_STEPS):
+        offsets = every if index < _FULL_STEPS else axes
+        batch = best + offsets * step * length
+        times = search(batch)
+        if np.min(times) < best_s:
+            best, best_s = batch[int(np.argmin(times))], float(np.min(times))
+    if not math.isfinite(best_s) or best_s >= unshaped_s * (1.0 - _MIN_GAIN):
+        return zeros, bus
+    return best, bus
+
+
+def free_shape(points, radii, shape, forbidden, step_rad):
+    """``shape``, or the largest of its halves, quarters, ... whose path is free at
+    ``step_rad`` (the search saw only coarse samples); None when none is."""
+    for scale in (1.0, 0.5, 0.25):
+        if not np.any(shape):
+            break
+        path = BlendedPath(points, radii, shape=scale * shape)
+        if len(forbidden_at(path, forbidden, step_rad)) == 0:
+            return scale * shape
+    return None

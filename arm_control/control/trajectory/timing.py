@@ -1,0 +1,178 @@
+"""Timing one piece of path, and the final check of a whole trajectory with the exact model.
+
+A piece from rest is timed exactly (``exact.fastest_speeds``), a moving start by TOPP-RA
+(``moving_start``), both under the bus their own draw leaves (``bus``). The trajectory is
+then checked on dense samples with the exact model: ``ArmDynamics.voltages`` for the volts,
+``PowerSupply.bus_voltages`` for the bus they leave (what ``PowerSupply.solve`` gives when
+it lowers nothing, which is what passing the check means), every voltage within its bus less
+the reserves, every current within its limit less the reserves, the bus above the brownout
+voltage, the speed and acceleration caps kept. If the check fails, every window is narrowed
+by the excess and the pieces timed again; as a last resort time is stretched until it passes.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from arm_control.control.trajectory.bus import (bus_profile, exact_timing,
+                                                FINE_BUS_ITERATIONS, under_the_bus)
+from arm_control.control.trajectory.limits import TrajectoryError, TrajectoryLimits
+from arm_control.control.trajectory.moving_start import time_moving
+from arm_control.control.trajectory.rows import PathTerms
+from arm_control.control.trajectory.timed import Piece, Trajectory
+from arm_control.model.dynamics import ArmDynamics
+
+VOLTAGE_TOLERANCE = 0.05           # V past a window the final check accepts (grid error)
+LIMIT_TOLERANCE = 1.02             # ratio of the speed/acceleration caps it accepts
+
+
+@dataclasses.dataclass
+class TimedPiece:
+    """A piece of path, its grid and the arm's terms along it, and its profile x = ṡ²."""
+
+    path: object
+    grid: np.ndarray
+    terms: PathTerms
+    x: np.ndarray
+    bus: tuple = None           # the (σ, sag) the timing assumed
+
+    @property
+    def start_speed(self) -> float:
+        return math.sqrt(max(float(self.x[0]), 0.0))
+
+
+def time_from_rest(path, grid, terms: PathTerms, limits: TrajectoryLimits,
+                   margin_v: float = 0.0, bus_hint=None):
+    """(x = ṡ² of the fastest rest-to-rest timing under the bus it leaves, back-EMF exact,
+    or None when the path cannot be followed; the (σ, sag) it assumed).
+
+    The bus is found on a coarse grid first (``bus.bus_profile``, from ``bus_hint``, the
+    (σ, sag) of a like path), then only raised where it falls short on the fine one."""
+    solve = exact_timing(terms, grid, limits, margin_v)
+    if limits.supply is None:
+        return solve(0.0), None
+    sigma, sag = bus_profile(path, terms.dynamics, limits, margin_v, 0.0, bus_hint)
+    x, fine = under_the_bus(solve, terms, limits, grid, np.interp(grid, sigma, sag),
+                            FINE_BUS_ITERATIONS, relax=0.0, give_up=True)
+    if x is None:
+        # The fine timing ran ahead of the coarse one's bus: start again from the most sag
+        # of each coarse point and its neighbours.
+        envelope = np.maximum(sag, np.maximum(np.append(sag[1:], sag[-1]),
+                                              np.insert(sag[:-1], 0, sag[0])))
+        x, fine = under_the_bus(solve, terms, limits, grid, np.interp(grid, sigma, envelope),
+                                FINE_BUS_ITERATIONS, relax=0.0)
+    return x, (grid, fine)
+
+
+def time_piece(path, grid, terms, limits, start_speed, margin_v=0.0, guess=None,
+               bus_hint=None):
+    """(x, controllable start x, bus (σ, sag)): from rest exactly, else by TOPP-RA; x None
+    when there is none."""
+    if start_speed == 0.0:
+        x, bus = time_from_rest(path, grid, terms, limits, margin_v, bus_hint)
+        return x, 0.0, bus
+    x, reachable = time_moving(path, grid, terms, limits, start_speed, margin_v, guess,
+                               bus_hint)
+    return x, reachable, None
+
+
+@dataclasses.dataclass
+class Verdict:
+    """What the final check found: the peak |V|, how far past its windows the trajectory
+    goes (V: voltage, current, or the bus short of the brownout), and the largest ratios of
+    speed and acceleration to their caps."""
+
+    peak_voltage: float
+    excess_v: float
+    speed_ratio: float
+    accel_ratio: float
+
+    @property
+    def passes(self) -> bool:
+        return (self.excess_v <= VOLTAGE_TOLERANCE and self.speed_ratio <= LIMIT_TOLERANCE
+                and self.accel_ratio <= LIMIT_TOLERANCE)
+
+
+def _past(values, direction, driving, braking):
+    """How far |values| goes past the window: driving along the joint's motion, braking
+    against it, the larger of the two for a joint still within 1e-3 rad/s."""
+    along = direction * values
+    allowed = np.where(direction == 0.0, np.maximum(driving, braking),
+                       np.where(along >= 0.0, driving, braking))
+    return np.abs(values) - allowed
+
+
+def check(trajectory: Trajectory, dynamics: ArmDynamics, limits: TrajectoryLimits) -> Verdict:
+    """The trajectory on its check times against every limit, with the exact model (a start
+    already faster than a speed cap may slow down into it)."""
+    q, qd, qdd = trajectory.sample_many(trajectory.check_times())
+    volts = dynamics.voltages(q, qd, qdd)
+    direction = np.where(np.abs(qd) > 1e-3, np.sign(qd), 0.0)
+    driving, braking = limits.budget
+    excess = -math.inf
+    if limits.supply is not None:
+        bus = limits.supply.bus_voltages(volts, qd)      # NaN: a brownout
+        excess = float(np.max(np.nan_to_num(
+            limits.supply.brownout_voltage + VOLTAGE_TOLERANCE - bus, nan=np.inf)))
+        sag = np.maximum(limits.nominal_voltage - np.nan_to_num(bus, nan=0.0), 0.0)[:, None]
+        torque = volts - np.array(dynamics.emf_v_per_rad_s) * qd
+        current = limits.current_budget_v
+        excess = max(excess, float(np.max(_past(torque, direction, current[:, 0],
+                                                current[:, 1]))))
+    else:
+        sag = 0.0
+    excess = max(excess, float(np.max(_past(volts, direction, driving - sag, braking - sag))))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        speed_cap = np.maximum(np.array(limits.max_velocity_rad_s), np.abs(qd[0]))
+        speed_ratio = float(np.max(np.nan_to_num(np.abs(qd) / speed_cap)))
+        accel_ratio = float(np.max(np.nan_to_num(
+            np.abs(qdd) / np.array(limits.max_acceleration_rad_s2))))
+    return Verdict(float(np.max(np.abs(volts))), excess, speed_ratio, accel_ratio)
+
+
+def assemble(pieces, start, end) -> Trajectory:
+    timed = [Piece.from_profile(p.path, p.grid, p.x) for p in pieces]
+    return Trajectory(timed, start, end)
+
+
+def verified(pieces, start, end, dynamics: ArmDynamics,
+             limits: TrajectoryLimits) -> Trajectory:
+    """Build the trajectory, check it with the exact model, and tighten until it passes."""
+    solve_limits, margin_v = limits, 0.0
+    trajectory = assemble(pieces, start, end)
+    for _ in range(3):
+        verdict = check(trajectory, dynamics, limits)
+        if verdict.passes:
+            trajectory.peak_voltage = verdict.peak_voltage
+            return trajectory
+        # Between grid points the exact model can ask a little more: tighten by the excess
+        # (a few volts at most: a bus that would brown out has none to measure it by).
+        margin_v += min(max(verdict.excess_v, 0.0), 2.0) + VOLTAGE_TOLERANCE
+        solve_limits = dataclasses.replace(
+            solve_limits,
+            max_velocity_rad_s=tuple(np.array(solve_limits.max_velocity_rad_s)
+                                     / max(verdict.speed_ratio, 1.0)),
+            max_acceleration_rad_s2=tuple(np.array(solve_limits.max_acceleration_rad_s2)
+                                          / max(verdict.accel_ratio, 1.0)))
+        retimed = []
+        for piece in pieces:
+            x, _, bus = time_piece(piece.path, piece.grid, piece.terms, solve_limits,
+                                   piece.start_speed, margin_v, piece.x, piece.bus)
+            retimed.append(piece if x is None else dataclasses.replace(piece, x=x, bus=bus))
+        pieces = retimed
+        trajectory = assemble(pieces, start, end)
+    # Last resort: slow the whole thing down until the exact check passes (from rest only:
+    # stretching time would change a moving start's velocity).
+    moving = pieces[0].start_speed > 0.0
+    for factor in () if moving else (1.02, 1.05, 1.1, 1.2, 1.4, 1.7, 2.0, 3.0):
+        slower = trajectory.scaled(factor)
+        verdict = check(slower, dynamics, limits)
+        if verdict.passes:
+            slower.peak_voltage = verdict.peak_voltage
+            return slower
+    raise TrajectoryError(
+        f'no trajectory found within the limits: it needs {verdict.excess_v:.2f} V more than '
+        f'the {limits.budget[0]:.2f} V (driving) / {limits.budget[1]:.2f} V (braking) at the '
+        f'nominal bus and the current limits allow, {verdict.speed_ratio:.2f} times the speed '
+        f'cap and {verdict.accel_ratio:.2f} times the acceleration cap')
