@@ -123,9 +123,8 @@ def test_a_brownout_is_recorded_with_its_duration(arm):
 
 @pytest.mark.parametrize('limited', [True, False])
 def test_the_batch_forms_are_the_scalar_form(arm, limited):
-    """``solve_many`` is ``solve`` on arrays, brownouts included; ``applied_voltages`` is
-    ``applied_at``; where the motor controllers lower nothing, ``bus_voltages`` is the bus
-    ``solve`` finds."""
+    """``solve_many`` is ``solve`` on arrays, brownouts included; where the motor controllers
+    lower nothing, ``bus_voltages`` is the bus ``solve`` finds."""
     supply = supply_for(arm if limited else unlimited(arm))
     rng = np.random.default_rng(8)
     command, speed = rng.uniform(-12.0, 12.0, (400, 2)), rng.uniform(-4.0, 4.0, (400, 2))
@@ -134,9 +133,6 @@ def test_the_batch_forms_are_the_scalar_form(arm, limited):
     np.testing.assert_array_equal(browned, [p.browned_out for p in alone])
     np.testing.assert_allclose(bus, [p.bus_voltage for p in alone], atol=1e-12)
     np.testing.assert_allclose(applied, [p.applied_v for p in alone], atol=1e-12)
-    np.testing.assert_allclose(supply.applied_voltages(command, speed, 9.0),
-                               [supply.applied_at(c, w, 9.0) for c, w in zip(command, speed)],
-                               atol=1e-12)
     as_is = ~browned & np.all(np.abs(applied - command) < 1e-12, axis=1)
     assert np.count_nonzero(as_is) > 20
     np.testing.assert_allclose(supply.bus_voltages(command[as_is], speed[as_is]), bus[as_is],

@@ -116,13 +116,6 @@ class PowerSupply:
                          for motor, speed in zip(self.motors, speed_rad_s))
         return PowerState(self.nominal_voltage, (0.0, 0.0), currents, 0.0, True)
 
-    def applied_voltages(self, command_v, speed_rad_s, bus_voltage) -> np.ndarray:
-        """The batch form of ``applied_at``: commands and joint speeds of shape (..., 2), at
-        a known bus voltage."""
-        emf = self._emf_v_per_rad_s * speed_rad_s
-        return np.clip(np.clip(command_v, emf - self._window_v, emf + self._window_v),
-                       -bus_voltage, bus_voltage)
-
     def solve_many(self, command_v, speed_rad_s):
         """The batch form of ``solve``: commands and joint speeds of shape (..., 2); returns
         (bus voltage (...), applied volts (..., 2), browned out (...)). The same intervals:

@@ -71,37 +71,39 @@ class FreeCells:
         tiles = index // self.TILE
         new = inside & ~self.tiles_done[tiles[:, 0], tiles[:, 1]]
         if np.any(new):
-            for tile in np.unique(tiles[new], axis=0):
-                self._prove(*tile)
+            self._prove(np.unique(tiles[new], axis=0))
         return inside & self.free[index[:, 0], index[:, 1]]
 
-    def _prove(self, ti: int, tj: int) -> None:
-        rows = np.arange(ti * self.TILE, min((ti + 1) * self.TILE, self.counts[0]))
-        columns = np.arange(tj * self.TILE, min((tj + 1) * self.TILE, self.counts[1]))
-        i, j = np.meshgrid(rows, columns, indexing='ij')
-        centres = self.low + (np.stack([i, j], axis=-1) + 0.5) * self.cell_rad
+    def _prove(self, tiles) -> None:
+        """Prove every cell of the tiles (k, 2) at once."""
+        offsets = np.stack(np.meshgrid(np.arange(self.TILE), np.arange(self.TILE),
+                                       indexing='ij'), axis=-1).reshape(-1, 2)
+        cells = (tiles[:, None, :] * self.TILE + offsets).reshape(-1, 2)
+        cells = cells[np.all(cells < self.counts, axis=-1)]
+        centres = self.low + (cells + 0.5) * self.cell_rad
         h = self.HALF_WIDTH_RAD * (1.0 + 1e-6)
         space = self.space
         within = (np.all((centres - h >= space.limits[:, 0])
                          & (centres + h <= space.limits[:, 1]), axis=-1)
-                  & (np.abs(centres[..., 1]) + h <= space.max_elbow_fold_rad))
-        shoulder = centres[:, 0, 0]
+                  & (np.abs(centres[:, 1]) + h <= space.max_elbow_fold_rad))
+        # The upper arm's sweep depends on the shoulder alone: once per shoulder cell.
+        rows, row_of = np.unique(cells[:, 0], return_inverse=True)
+        shoulder = (self.low[0] + (rows + 0.5) * self.cell_rad)[:, None]
         reach = space.upper_m / math.cos(h)
         ends = [(reach * np.cos(shoulder + side), reach * np.sin(shoulder + side))
                 for side in (-h, h)]
         zero = np.zeros_like(shoulder)
-        sweep_hits = np.zeros(len(shoulder), dtype=bool)
-        for _, rect in space.rectangles:
+        sweep_hits = np.zeros(len(rows), dtype=bool)
+        if space.rectangles:
+            bounds = space._bounds
             for x0, y0, x1, y1 in ((zero, zero, *ends[0]), (zero, zero, *ends[1]),
                                    (*ends[0], *ends[1])):
-                sweep_hits |= segments_hit_rectangle(x0, y0, x1, y1, rect)
-            sweep_hits |= _in_triangle(rect[0], rect[1], (zero, zero), *ends)
-        _, forearm = self.grown._links(centres)
-        forearm_hits = np.zeros(centres.shape[:-1], dtype=bool)
-        for _, rect in self.grown.rectangles:
-            forearm_hits |= segments_hit_rectangle(*forearm, rect)
-        self.free[i, j] = within & ~sweep_hits[:, None] & ~forearm_hits
-        self.tiles_done[ti, tj] = True
+                sweep_hits |= np.any(segments_hit_rectangle(x0, y0, x1, y1, bounds), axis=-1)
+            sweep_hits |= np.any(_in_triangle(bounds[0], bounds[1], (zero, zero), *ends),
+                                 axis=-1)
+        self.free[cells[:, 0], cells[:, 1]] = (within & ~sweep_hits[row_of]
+                                               & ~self.grown.forearm_collides(centres))
+        self.tiles_done[tiles[:, 0], tiles[:, 1]] = True
 
 
 def _in_triangle(x, y, a, b, c) -> np.ndarray:
@@ -163,17 +165,22 @@ class ForbiddenSpace:
         return (np.all((q >= self.limits[:, 0]) & (q <= self.limits[:, 1]), axis=-1)
                 & (np.abs(q[..., 1]) <= self.max_elbow_fold_rad))
 
-    def collides(self, q) -> np.ndarray:
-        """Whether a point of either link lies in a forbidden rectangle (limits aside): every
-        rectangle at once, along a last axis."""
+    def collides(self, q, links=(0, 1)) -> np.ndarray:
+        """Whether a point of either link (of ``links``: 0 the upper arm, 1 the forearm) lies
+        in a forbidden rectangle (limits aside): every rectangle at once, along a last
+        axis."""
         q = np.asarray(q, dtype=float)
         hit = np.zeros(q.shape[:-1], dtype=bool)
         if not self.rectangles:
             return hit
-        for link in self._links(q):
-            hit |= np.any(segments_hit_rectangle(*(end[..., None] for end in link),
+        segments = self._links(q)
+        for link in links:
+            hit |= np.any(segments_hit_rectangle(*(end[..., None] for end in segments[link]),
                                                  self._bounds), axis=-1)
         return hit
+
+    def forearm_collides(self, q) -> np.ndarray:
+        return self.collides(q, links=(1,))
 
     def is_free(self, q) -> np.ndarray | bool:
         """True where q (shape (..., 2)) is allowed (and clear by ``margin_rad``)."""

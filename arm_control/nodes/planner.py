@@ -34,6 +34,7 @@ from arm_control.config import ArmConfig, FRAME_ID, PlannerConfig
 from arm_control.control.events import quote
 from arm_control.control.goals import PLANE_TOLERANCE_M
 from arm_control.control.plans import BranchRanking
+from arm_control.model.kinematics import UnreachableError
 from arm_control.nodes import messages
 from arm_control.nodes.common import declare_parameters, LATCHED, run, status
 from arm_control.planning.planner import Planner, poses_from_waypoints
@@ -146,8 +147,11 @@ class PlannerNode(Node):
     def plan(self, start_q, goal_xy):
         """The elbow branch that gets there soonest, as the controller would choose it
         (``BranchRanking``); the planner's own choice for a goal without a clear branch."""
-        plans = [self.planner.plan_to_configuration(start_q, q)
-                 for q in self.ranking.validator.free_configurations(*goal_xy)]
+        try:
+            branches = self.ranking.validator.free_configurations(*goal_xy)
+        except UnreachableError:
+            branches = []                  # out of reach: the planner's answer says so
+        plans = [self.planner.plan_to_configuration(start_q, q) for q in branches]
         fastest = self.ranking.fastest_branch([plan for plan in plans if plan.ok])
         return fastest if fastest is not None else self.planner.plan(start_q, goal_xy)
 

@@ -29,8 +29,8 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, Header
 
 from arm_control.config import ArmConfig, JOINT_NAMES
-from arm_control.nodes.common import COMMANDS, declare_parameters, finite, run, STATE_STREAM
-from arm_control.nodes.viewer import joint_positions
+from arm_control.nodes.common import COMMANDS, declare_parameters, run, STATE_STREAM
+from arm_control.nodes.messages import finite, joint_pair
 from arm_control.sysid.log import Log, LogWriter, read_log
 from arm_control.sysid.report import identify
 from arm_control.sysid.session import provisional_model, Session
@@ -89,16 +89,14 @@ class SysIdNode(Node):
     # ------------------------------------------------------------------ inputs
 
     def on_joint_states(self, msg: JointState) -> None:
-        position = joint_positions(msg)
-        velocity = list(msg.velocity)
-        if len(msg.name) == len(velocity) and all(n in msg.name for n in JOINT_NAMES):
-            velocity = [velocity[list(msg.name).index(n)] for n in JOINT_NAMES]
-        if len(position) < 2 or not finite(position[:2]):
+        position = joint_pair(msg, 'position')
+        velocity = joint_pair(msg, 'velocity')
+        if position is None or not finite(position):
             self.get_logger().warning(f'ignored joint_states: position {list(msg.position)} '
                                       'is not 2 finite angles', throttle_duration_sec=1.0)
             return
         now = self.now_s()
-        if len(velocity) < 2 or not finite(velocity[:2]):
+        if velocity is None or not finite(velocity):
             velocity = self._velocity_from(position, now)
         self.joint_sample = (now, np.array(position[:2], float), np.array(velocity[:2], float))
         if self.first_joint_s is None:
