@@ -1,5 +1,5 @@
 """The period feedforward: a voltage held over each control period that keeps the arm on the
-trajectory, within the bus voltage it is given."""
+trajectory, within the battery voltage it is given."""
 
 import math
 
@@ -25,13 +25,15 @@ def setup():
 
 def drive_held(arm, trajectory, voltage_for_period, period_s=0.02, hold_s=0.3):
     """The noise-free plant driven at 50 Hz by a voltage held over each period (given the
-    time and the bus the plant reports): the true state at every period's start, and at
-    the end."""
+    time and the battery's open-circuit voltage, V_bus + R·I_supply, as the plant reports
+    them): the true state at every period's start, and at the end."""
     plant = ArmPlant(arm, trajectory.start_rad)
     states = []
     for k in range(int(math.ceil((trajectory.duration_s + hold_s) / period_s))):
         states.append(np.array(plant.state))
-        plant.set_voltage(voltage_for_period(k * period_s, plant.power.bus_voltage))
+        power = plant.power
+        battery = power.bus_voltage + arm.battery.resistance_ohm * power.supply_current_a
+        plant.set_voltage(voltage_for_period(k * period_s, battery))
         plant.advance(period_s)
     return np.array(states), np.array(plant.state)
 
@@ -67,8 +69,8 @@ def test_the_period_feedforward_keeps_the_held_arm_on_the_trajectory(setup):
     assert np.max(np.abs(held[after, :2] - waypoints[-1])) > 3.0 * deadbeat_off
 
 
-def test_the_feedforward_stays_within_the_bus_it_is_given(setup):
-    """Given a sagging bus, no voltage it asks for goes past it; given none (or one that is
+def test_the_feedforward_stays_within_the_battery_voltage_it_is_given(setup):
+    """Given a weak battery, no voltage it asks for goes past it; given none (or one that is
     not a number), its maximum holds."""
     arm, dynamics, forbidden, limits = setup
     trajectory = time_optimal_trajectory(UP_TO_THE_FRONT, dynamics, forbidden, limits)
@@ -78,7 +80,7 @@ def test_the_feedforward_stays_within_the_bus_it_is_given(setup):
         return max(np.max(np.abs(feedforward.step(t, trajectory.sample, bus)))
                    for t in np.arange(0.0, trajectory.duration_s, 0.02))
 
-    assert peak(None) > 8.5            # the trajectory asks for more than a sagged bus gives
+    assert peak(None) > 8.5            # the trajectory asks for more than a weak battery gives
     assert peak(8.0) == pytest.approx(8.0)
     assert peak(math.nan) == peak(None)
     assert peak(13.0) <= 12.0

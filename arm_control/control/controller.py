@@ -6,7 +6,7 @@ Each period the node (or a test, or a benchmark) calls ``step(now_s, reading)``;
 2. supervises: stale sensors, joint limits, the arm moved under it, then the goals
    (``goal_runner.GoalRunner``: the planner's deadline, arrival, dwell, the next goal);
    ``state_machine.py`` holds every allowed transition;
-3. commands V = feedforward + PID, clamped to the bus voltage: the feedforward is the held
+3. commands V = feedforward + PID, clamped to the battery's volts: the feedforward is the held
    voltage that keeps a model of the arm on the trajectory (``PeriodFeedforward``), the PID
    tracks that model's state on the estimate;
 4. enforces the safety rules (``safety.py``): control that has failed stops at 0 V; an
@@ -284,15 +284,15 @@ class ArmController:
         self.goals.supervise(now_s, self.sensing.state)
 
     def _control(self, now_s: float, dt_s: float) -> np.ndarray:
-        """Feedforward at the setpoint plus PID on the estimate, clamped to the bus voltage
-        (and to the battery's nominal volts, the command's range, while motors regenerate)."""
+        """Feedforward at the setpoint plus PID on the estimate, clamped to the battery's
+        open-circuit voltage (within its nominal volts, the command's range)."""
         if self.state == S.DRIVER:
             self.setpoints.driver.decide(now_s)
         self.setpoint = self._reference(now_s)
         # The voltage is held over the coming period: the feedforward keeps a model of the
         # arm on the trajectory at every period's end; the PID tracks that model.
-        bus = min(self.sensing.bus_voltage, self.arm.battery.nominal_voltage)
-        feedforward = self.feedforward.step(now_s, self._reference, bus_voltage=bus)
+        bus = min(self.sensing.battery_voltage, self.arm.battery.nominal_voltage)
+        feedforward = self.feedforward.step(now_s, self._reference, battery_voltage=bus)
         reference, estimate = self.feedforward.state, self.sensing.state
         error = reference[:2] - estimate[:2]
         feedback = np.array(self.pid.update(error, reference[2:] - estimate[2:], dt_s,

@@ -27,8 +27,8 @@ class PeriodFeedforward:
 
     The reference restarts on the setpoint when it is more than ``restart_rad`` away (the
     setpoint jumped) or the loop paused for more than two periods. The voltage is clamped to
-    ±``max_voltage``, or to the bus voltage when ``step`` is given one (what the motor
-    controllers can apply).
+    ±``max_voltage``, or to the battery's open-circuit voltage when ``step`` is given one:
+    the reference's bus then sags from it under the reference's own draw.
     """
 
     def __init__(self, dynamics: ArmDynamics, period_s: float, max_voltage: float,
@@ -63,14 +63,16 @@ class PeriodFeedforward:
                 x = rk4_batch(f if applied else self.dynamics.derivatives, x, volts[:, k], h)
         return x
 
-    def step(self, now_s: float, setpoint, bus_voltage: float | None = None) -> np.ndarray:
+    def step(self, now_s: float, setpoint, battery_voltage: float | None = None) -> np.ndarray:
         """The voltage to hold from ``now_s``; ``setpoint(t)`` -> (q, q̇, q̈) of the
-        trajectory; ``bus_voltage``: the bus the sim reports (V), the most the motor
-        controllers can apply. Updates ``state``, the reference at ``now_s``."""
+        trajectory; ``battery_voltage``: the battery's open-circuit voltage (V) as measured.
+        Updates ``state``, the reference at ``now_s``."""
         period = self.period_s
         limit = self.max_voltage
-        if bus_voltage is not None and math.isfinite(bus_voltage) and bus_voltage > 0.0:
-            limit = min(limit, float(bus_voltage))
+        if battery_voltage is not None and math.isfinite(battery_voltage) \
+                and battery_voltage > 0.0:
+            self.supply.nominal_voltage = float(battery_voltage)
+            limit = min(limit, float(battery_voltage))
         q_sp, qd_sp, _ = setpoint(now_s)
         here = np.concatenate([q_sp, qd_sp])
         if self.state is not None and 0.0 < now_s - self.time_s <= 2.5 * period:

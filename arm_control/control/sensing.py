@@ -4,6 +4,11 @@ was put somewhere else under it.
 Each reading is folded in at the time it was taken: the filter predicts with the voltage the
 motor controllers applied (the command within the current limits and the bus voltage the
 robot reports, as a roboRIO reads its own), updates, then predicts up to now.
+
+The battery's open-circuit voltage, V_bus + R_battery·I_supply from the same reading, is
+what the control ahead uses: it changes slowly, while the bus itself swings with every
+command, so a bus reading even a period old would clamp the next command to a sag that has
+passed (through ROS: the tool 38-71 mm below its path at the end of a fast move).
 """
 
 from dataclasses import dataclass
@@ -30,9 +35,9 @@ class SensorReading:
 
     ``encoder_rad`` may hold NaN when the encoders are missing: the filter skips them.
     ``sampled_s``: when the sensors took it on their own clock (the message's stamp; only
-    differences are used), NaN if unknown. ``bus_voltage``: NaN when not reported (taken as
-    the battery's nominal volts). ``ArmPlant.read()`` returns an object with these fields
-    but ``sampled_s``.
+    differences are used), NaN if unknown. ``bus_voltage`` and ``supply_current_a`` (from
+    the battery): NaN when not reported (the battery's nominal volts, no draw).
+    ``ArmPlant.read()`` returns an object with these fields but ``sampled_s``.
     """
 
     potentiometer_rad: tuple[float, float]
@@ -40,6 +45,7 @@ class SensorReading:
     encoder_rad: tuple[float, float] = (math.nan, math.nan)
     sampled_s: float = math.nan
     bus_voltage: float = math.nan
+    supply_current_a: float = math.nan
 
 
 class Sensing:
@@ -51,6 +57,8 @@ class Sensing:
         self.estimator = ArmEstimator(arm, process_noise_rad_s2)
         self.nominal_voltage = arm.battery.nominal_voltage
         self.bus_voltage = self.nominal_voltage
+        self.battery_voltage = self.nominal_voltage     # open circuit
+        self.battery_resistance_ohm = arm.battery.resistance_ohm
         self.max_leap_speed_rad_s = LEAP_SPEED_FACTOR * float(
             np.max(dynamics.free_speed_rad_s(self.nominal_voltage)))
         self.time_s = None                 # of the estimate; None before the first reading
@@ -104,6 +112,9 @@ class Sensing:
             self.jumped |= self.estimator.jump_count > resets and leapt
         if math.isfinite(bus) and bus > 0.0:
             self.bus_voltage = bus
+            current = float(getattr(reading, 'supply_current_a', math.nan))
+            self.battery_voltage = bus + self.battery_resistance_ohm * current \
+                if math.isfinite(current) else self.nominal_voltage
         self._predict(command_v, now_s)
 
     def _leapt(self, pot, taken_s: float, sampled_s: float) -> bool:

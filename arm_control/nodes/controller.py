@@ -1,7 +1,7 @@
 """The ``controller`` node: goals in, motor voltages out -- a shell around ArmController.
 
-Subscribes ``joint_states``, ``motor_encoders`` (JointState), ``battery_state`` (the bus
-voltage the feedforward and the estimate use), ``goal_point`` (PointStamped: queued),
+Subscribes ``joint_states``, ``motor_encoders`` (JointState), ``battery_state`` (bus volts
+and current, for the estimate and the feedforward), ``goal_point`` (PointStamped: queued),
 ``goal_preset`` (String: replaces the queue and the motion, as a driver's button) and
 ``driver_velocity`` (TwistStamped: tool velocity in arm_base). Publishes ``voltage_command``
 every period, ``arm_state`` (latched), ``~/setpoint``, ``~/estimate``, ``~/goal_queue``
@@ -143,9 +143,10 @@ class ControllerNode(Node):
         def fresh(latest, missing):
             return latest[0] if latest is not None and \
                 now - latest[1] <= self.config.joint_state_timeout_s else missing
-        encoder, bus = fresh(self.encoders, (math.nan, math.nan)), fresh(self.bus, math.nan)
+        encoder = fresh(self.encoders, (math.nan, math.nan))
+        bus, supply_current = fresh(self.bus, (math.nan, math.nan))
         self.reading = (SensorReading(tuple(position), tuple(velocity), tuple(encoder),
-                                      messages.stamp_s(msg.header), bus), now)
+                                      messages.stamp_s(msg.header), bus, supply_current), now)
 
     @guarded
     def on_encoders(self, msg: JointState) -> None:
@@ -159,7 +160,8 @@ class ControllerNode(Node):
     def on_battery(self, msg: BatteryState) -> None:
         if not 0.0 < msg.voltage <= 2.0 * self.arm.battery.nominal_voltage:   # NaN too
             return self.warn_bad(f'ignored battery_state: voltage {msg.voltage} V')
-        self.bus = (float(msg.voltage), self.now_s())
+        # BatteryState's current is negative while discharging; NaN when not reported.
+        self.bus = ((float(msg.voltage), -float(msg.current)), self.now_s())
 
     @guarded
     def on_goal_point(self, msg: PointStamped) -> None:
