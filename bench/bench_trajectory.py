@@ -30,7 +30,7 @@ time (which also counts whatever else shares the machine's two cores).
 ``--what-if``: the current limits at 40, 60, 80 and 120 A per motor (and none): per move,
 the timed trajectory's duration against the electrical minimum at that limit.
 
-``--planning``: what a goal costs the controller (``ArmController.plan_directly``): the path
+``--planning``: what a goal costs the controller (``PlanTimer.plan_and_time``): the path
 of each free elbow branch (planner), the branch choice (the quick estimates), the timing of
 the branches kept, and the total, median and p95 over repeats, CPU and wall, on the default
 arm (this suite) and on the FRC robot (its 30 preset-to-preset moves). To measure it on a

@@ -1,10 +1,11 @@
 """What a goal costs the controller: path, branch choice and timing, per move.
 
-``ArmController.plan_directly``: the path of each free elbow branch (planner), the branch
-choice (the quick estimates), the timing of the branches kept, and the total, median and p95
-over repeats, CPU and wall, on the default arm (``bench_trajectory.SUITE``) and on the FRC
-robot (its 30 preset-to-preset moves). A fresh controller's first goal also pays for its
-caches (the forbidden-space cells it proves); it is reported apart.
+``PlanTimer.plan_and_time`` (planned in-process): the path of each free elbow branch
+(planner), the branch choice (the quick estimates), the timing of the branches kept, and the
+total, median and p95 over repeats, CPU and wall, on the default arm
+(``bench_trajectory.SUITE``) and on the FRC robot (its 30 preset-to-preset moves). A fresh
+controller's first goal also pays for its caches (the forbidden-space cells it proves); it is
+reported apart.
 
     python bench/bench_trajectory.py --planning [repeats]
     # on a busy machine, two busy loops beside it:
@@ -63,14 +64,16 @@ def planning_moves(arm, files):
 
 def planning_times(files=(), repeats=PLANNING_REPEATS):
     """Rows of path / branch choice / timing / total ms per move, and the pooled totals."""
-    from arm_control.control.arm_controller import ArmController, PlanRequest
+    from arm_control.control.controller import ArmController
     from arm_control.control.goals import Goal
+    from arm_control.control.plans import PlanRequest
     from arm_control.planning.planner import Planner
     arm, controller = config.load('controller', *files)
     planner = _TimedPlanner(Planner(arm, config.load('planner', *files)[1]))
     core = ArmController(arm, controller)
     timing_cpu = [0.0]
-    time_plan = core.time_plan
+    timer = core.plan_timer
+    time_plan = timer.time_plan
 
     def timed_time_plan(request, plan):
         began = time.thread_time()
@@ -79,7 +82,7 @@ def planning_times(files=(), repeats=PLANNING_REPEATS):
         finally:
             timing_cpu[0] += time.thread_time() - began
 
-    core.time_plan = timed_time_plan
+    timer.time_plan = timed_time_plan
     requests = [PlanRequest(i, Goal(goal[0], goal[1], name), tuple(q), (0.0, 0.0), None, 0.0)
                 for i, (name, q, goal) in enumerate(planning_moves(arm, files))]
     first = []
@@ -88,7 +91,7 @@ def planning_times(files=(), repeats=PLANNING_REPEATS):
         for request in requests:
             planner.cpu_s, timing_cpu[0] = 0.0, 0.0
             wall, cpu = time.perf_counter(), time.thread_time()
-            timed = core.plan_directly(request, planner)
+            timed = timer.plan_and_time(request, planner)
             cpu, wall = time.thread_time() - cpu, time.perf_counter() - wall
             if repeat == 0:            # the first goal of a fresh controller pays its caches
                 first.append(1e3 * wall)
@@ -113,7 +116,7 @@ def planning_times(files=(), repeats=PLANNING_REPEATS):
 def planning(repeats=PLANNING_REPEATS):
     for label, files in (('default arm', ()), ('FRC robot', (str(FRC_ROBOT),))):
         rows, pooled, first = planning_times(files, repeats)
-        print(f'\nPlanning per goal on the {label} (ArmController.plan_directly: path of each '
+        print(f'\nPlanning per goal on the {label} (PlanTimer.plan_and_time: path of each '
               f'free branch + branch choice + timing), {repeats} repeats per move; path, '
               'choice and timing: CPU medians')
         print_table(rows)
