@@ -38,36 +38,27 @@ latency: ours with the plan taken only at the next regular 50 Hz tick, and at 20
     python bench/bench_controller.py --set feedback_voltage_reserve=0.5   # a what-if
 """
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 import json
 import math
 from pathlib import Path
 import statistics
 import sys
-import time
 
 BENCH = Path(__file__).resolve().parent
 sys.path[:0] = [str(BENCH), str(BENCH.parent)]       # the suite beside, the package above
 
 from bench_trajectory import _start_configuration, Move, SUITE  # noqa: E402 (one suite)
+from in_process import fmt, measure, Run, run_ours, simulate, TIMEOUT_S  # noqa: E402
 import minimum_time as ocp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from arm_control import config  # noqa: E402
-from arm_control.control.controller import ArmController  # noqa: E402
-from arm_control.control.goals import GoalValidator  # noqa: E402
-from arm_control.control.trajectory import (time_optimal_trajectory,  # noqa: E402
-                                            TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics  # noqa: E402
 from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
-from arm_control.model.plant import ArmPlant  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
 
-HOLD_BEFORE_S = 0.5
-TIMEOUT_S = 8.0
-FINAL_AFTER_S = 1.0
-PHYSICS_MS = 1                    # the plant's step and the recording's
 SEED_GAINS = ((2.00, 0.04), (1.75, 0.02))       # (kP, kD) shoulder, elbow
 SEED_RATE_HZ = 50.0
 ZOH_PERIOD_S = 0.02
@@ -105,191 +96,6 @@ class SeedController:
         return np.clip(voltage, -volts, volts)
 
 
-class PlanHandOff:
-    """The core's planner hand-off (``take_plan_requests`` → ``plan_and_time`` →
-    ``on_timed_plan``). Each request is planned at once; the plan is ready after the CPU
-    time that took (path + branch choice + timing) and is taken then, by an extra control
-    cycle (``at_next_tick`` False), or only at the next regular tick (True)."""
-
-    def __init__(self, core, planner, at_next_tick=False):
-        self.core, self.planner, self.at_next_tick = core, planner, at_next_tick
-        self.waiting = []             # (ready at, timed plan)
-        self.plan_cpu_s, self.plan_wall_s = [], []
-        self.delivered_s = math.nan
-
-    def after_step(self, now_s):
-        for request in self.core.take_plan_requests():
-            cpu, wall = time.thread_time(), time.perf_counter()
-            timed = self.core.plan_timer.plan_and_time(request, self.planner)
-            cpu, wall = time.thread_time() - cpu, time.perf_counter() - wall
-            self.plan_cpu_s.append(cpu)
-            self.plan_wall_s.append(wall)
-            ready = now_s + math.ceil(cpu * 1000.0 / PHYSICS_MS) * PHYSICS_MS / 1000.0
-            self.waiting.append((ready, timed))
-
-    def due(self, now_s, regular_tick):
-        """Plans to take in a control cycle at ``now_s`` (None: no reason for a cycle)."""
-        ready = [item for item in self.waiting if item[0] <= now_s + 1e-9]
-        if not ready or (self.at_next_tick and not regular_tick):
-            return None
-        for item in ready:
-            self.waiting.remove(item)
-        return [timed for _, timed in ready]
-
-    def deliver(self, now_s, plans):
-        for timed in plans:
-            self.core.on_timed_plan(now_s, timed)
-            self.delivered_s = now_s
-
-
-@dataclass
-class Run:
-    """What one controller did on one move, measured on the true state."""
-
-    move_s: float = math.nan
-    final_error_deg: float = math.nan
-    overshoot_deg: float = math.nan      # n/a: never within tolerance
-    peak_voltage: float = 0.0
-    lowest_m: float = math.inf
-    min_bus_v: float = math.nan
-    peak_current_a: float = math.nan
-    energy_j: float = math.nan           # drawn from the battery from the goal to arrival
-    brownouts: int = 0
-    reached: bool = False
-    plan_arrived_s: float = math.nan     # ours: when the timed plan was taken
-    trajectory_s: float = math.nan       # ours: how long its trajectory lasts
-    plan_cpu_ms: float = math.nan        # ours: path + timing, CPU
-    plan_wall_ms: float = math.nan       # ours: ... wall time (the machine is shared)
-    cycle_cpu_ms: tuple = ()             # ours: CPU of each control cycle (planning apart)
-
-
-def heights_m(arm, q):
-    """min(y of the elbow, y of the tool): the lowest point of the links above the pivot."""
-    q = np.atleast_2d(q)
-    elbow_y = arm.shoulder.length_m * np.sin(q[:, 0])
-    return np.minimum(elbow_y, elbow_y + arm.elbow.length_m * np.sin(q[:, 0] + q[:, 1]))
-
-
-def measure(arm, controller_config, record, goal_q, start_q) -> Run:
-    """Move time, final error, overshoot, peak voltage, lowest point and electrics of a
-    recorded run."""
-    tolerance = controller_config.goal_tolerance_rad
-    still_below = controller_config.settled_velocity_rad_s
-    times, states, voltages = (np.array(record[k]) for k in ('time', 'state', 'voltage'))
-    power = np.array(record['power'])          # bus V, |motor current| A ×2, supply A
-    after = times >= -1e-9
-    t, x, v, p = times[after], states[after], voltages[after], power[after]
-    error = np.abs(x[:, :2] - goal_q)
-    inside = np.all(error < tolerance, axis=1)
-    still = np.all(np.abs(x[:, 2:]) < still_below, axis=1)
-    run = Run(peak_voltage=float(np.max(np.abs(v))), lowest_m=float(np.min(heights_m(arm, x))),
-              brownouts=record['brownouts'])
-    # Settled: inside from here to the end, and still at that moment.
-    outside_after = np.flatnonzero(~inside)
-    first_for_good = 0 if len(outside_after) == 0 else outside_after[-1] + 1
-    candidates = np.flatnonzero(still[first_for_good:]) + first_for_good
-    if len(candidates) and t[-1] - t[candidates[0]] >= FINAL_AFTER_S - 1e-9:
-        i = candidates[0]
-        run.move_s, run.reached = float(t[i]), True
-        j = int(np.searchsorted(t, t[i] + FINAL_AFTER_S - 1e-9))
-        run.final_error_deg = float(np.degrees(np.max(error[min(j, len(t) - 1)])))
-    else:
-        run.final_error_deg = float(np.degrees(np.max(error[-1])))
-    moving = t <= (run.move_s if run.reached else t[-1]) + 1e-9
-    run.min_bus_v = float(np.min(p[moving, 0]))
-    run.peak_current_a = float(np.max(p[moving, 1:3]))
-    run.energy_j = float(np.sum(p[moving, 0] * p[moving, 3]) * PHYSICS_MS / 1000.0)
-    arrived = np.flatnonzero(inside)    # past the goal after both first get within tolerance
-    if len(arrived):
-        i = arrived[0]
-        direction = np.where(np.abs(x[i, 2:]) > 1e-3, np.sign(x[i, 2:]),
-                             np.sign(goal_q - x[i, :2]))
-        past = direction * (x[i:, :2] - goal_q)
-        run.overshoot_deg = float(np.degrees(max(np.max(past), 0.0)))
-    return run
-
-
-def simulate(arm, controller_config, controller, on_goal, start_q, seed, hand_off=None,
-             plant_arm=None):
-    """Hold at the start, give the goal at t = 0, run until settled for 1 s or timed out.
-
-    Whole milliseconds: regular control cycles every period from −0.5 s, plus a cycle
-    whenever ``hand_off`` has a plan ready; the true state is recorded every millisecond.
-    The plant is ``plant_arm`` (default ``arm``: the controller's model is the truth).
-    """
-    plant = ArmPlant(plant_arm or arm, start_q, seed=seed)
-    period_ms = 1000.0 / controller_config.loop_rate_hz
-    if abs(period_ms - round(period_ms)) > 1e-9:
-        raise ValueError(f'the bench needs a whole-millisecond period, not {period_ms} ms')
-    period_ms = int(round(period_ms))
-    first_ms, last_ms = -int(HOLD_BEFORE_S * 1000), int(TIMEOUT_S * 1000)
-    record = {'time': [], 'state': [], 'voltage': [], 'power': []}
-    still_count, needed = 0, int((FINAL_AFTER_S + 0.1) * 1000 / PHYSICS_MS)
-    reference = None
-    for now_ms in range(first_ms, last_ms, PHYSICS_MS):
-        now_s = now_ms / 1000.0
-        regular = (now_ms - first_ms) % period_ms == 0
-        if now_ms == 0:
-            on_goal(now_s)
-        plans = hand_off.due(now_s, regular) if hand_off is not None else None
-        if regular or plans is not None:
-            if plans:
-                hand_off.deliver(now_s, plans)
-            plant.set_voltage(controller.step(now_s, plant.read()))
-            if hand_off is not None:
-                hand_off.after_step(now_s)
-        plant.advance(PHYSICS_MS / 1000.0)
-        state = np.array(plant.state)
-        record['time'].append(now_s + PHYSICS_MS / 1000.0)
-        record['state'].append(state)
-        record['voltage'].append(np.array(plant.voltage))
-        power = plant.power
-        record['power'].append((power.bus_voltage, abs(power.motor_current_a[0]),
-                                abs(power.motor_current_a[1]), power.supply_current_a))
-        # Stop early once the arm has been still for a while (measure() decides the rest).
-        if now_ms > 0 and np.all(np.abs(state[2:]) < controller_config.settled_velocity_rad_s):
-            if reference is None or np.max(np.abs(state[:2] - reference)) > 1e-3:
-                reference, still_count = state[:2].copy(), 0
-            still_count += 1
-            if still_count >= needed:
-                break
-        else:
-            reference, still_count = None, 0
-    record['brownouts'] = len(plant.brownouts) + (plant.browned_out_since_s is not None)
-    return record
-
-
-class _Timed:
-    """A controller whose ``step`` CPU time is recorded."""
-
-    def __init__(self, controller):
-        self.controller, self.cpu_s = controller, []
-
-    def step(self, now_s, reading):
-        began = time.thread_time()
-        voltage = self.controller.step(now_s, reading)
-        self.cpu_s.append(time.thread_time() - began)
-        return voltage
-
-
-def run_ours(arm, controller_config, planner, start_q, goal_xy, seed, at_next_tick=False):
-    core = ArmController(arm, controller_config)
-    hand_off = PlanHandOff(core, planner, at_next_tick)
-    timed = _Timed(core)
-    record = simulate(arm, controller_config, timed, lambda t: core.submit_goal(t, *goal_xy),
-                      start_q, seed, hand_off)
-    goal_q = core.goals.goal_q if core.goals.goal_q is not None else np.full(2, np.nan)
-    run = measure(arm, controller_config, record, goal_q, start_q)
-    last = core.goals.plans.last
-    if last is not None and last.ok:
-        run.trajectory_s = last.trajectory.duration_s
-        run.plan_arrived_s = hand_off.delivered_s
-    run.plan_cpu_ms = 1000 * sum(hand_off.plan_cpu_s)
-    run.plan_wall_ms = 1000 * sum(hand_off.plan_wall_s)
-    run.cycle_cpu_ms = tuple(1000 * np.array(timed.cpu_s))
-    return run
-
-
 def run_seed(arm, controller_config, start_q, goal_xy, seed):
     kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
     goal_q = np.array(SeedController.goal_for(kinematics, *goal_xy))
@@ -304,66 +110,10 @@ def run_seed(arm, controller_config, start_q, goal_xy, seed):
     return measure(arm, seed_config, record, goal_q, start_q)
 
 
-def fmt(value, spec='.2f'):
-    return 'n/a' if value is None or not math.isfinite(value) else format(value, spec)
-
-
-# --- the minimum time -------------------------------------------------------------------
-
-def minimum_times(arm, controller_config, moves):
-    """Per move: the direct-collocation minimum time under the electrical limits over the
-    goal's free elbow branches (knots refined 25 → 50 → 100) and the 50 Hz minimum on the
-    fastest branch."""
-    dynamics, forbidden = ArmDynamics(arm), ForbiddenSpace(arm)
-    planner = Planner(arm, config.load('planner')[1])
-    validator = GoalValidator(arm)
-    whole = TrajectoryLimits.from_config(arm, replace(
-        controller_config, feedback_voltage_reserve=0.0, driving_voltage_reserve=0.0))
-    out = {}
-    for name, start_xy, goal_xy in moves:
-        move = Move(name, start_xy, goal_xy, arm, controller_config, dynamics, forbidden, None)
-        start_q = _start_configuration(move)
-        best = None
-        for goal_q in validator.free_configurations(*goal_xy):
-            plan = planner.plan_to_configuration(start_q, goal_q)
-            if not plan.ok:
-                continue
-            waypoints = np.array(plan.waypoints_rad)
-            fast = time_optimal_trajectory(waypoints, dynamics, forbidden, whole)
-            knots, guess = ocp.refined_minimum(arm, start_q, waypoints[-1],
-                                               ocp.guess_from(fast, arm))
-            if math.isfinite(knots[-1]) and (best is None or knots[-1] < best['min_s']):
-                best = {'min_s': knots[-1], 'knots_s': knots, 'goal_q': list(waypoints[-1]),
-                        'guess': guess}
-        if best is None:
-            out[name] = {'min_s': math.nan, 'knots_s': [], 'zoh_s': math.nan}
-            continue
-        best['zoh_s'] = ocp.minimum_time_zoh(arm, start_q, np.array(best['goal_q']),
-                                             best.pop('guess'), best['min_s'], ZOH_PERIOD_S)
-        out[name] = best
-        print(f'  minimum {name}: {best["min_s"]:.3f} s (knots {ocp.KNOTS}: '
-              f'{", ".join(f"{t:.4f}" for t in best["knots_s"])}), 50 Hz: '
-              f'{best["zoh_s"]:.2f} s', file=sys.stderr, flush=True)
-    return out
-
-
-def load_or_compute_minimum(arm, controller_config, moves, cache_path):
-    """The minimum times, from ``cache_path`` when it holds every move (a JSON file written
-    by an earlier run of the same suite), else computed (and written there when given)."""
-    if cache_path and Path(cache_path).exists():
-        cached = json.loads(Path(cache_path).read_text())
-        if all(name in cached for name, _, _ in moves):
-            return cached
-    out = minimum_times(arm, controller_config, moves)
-    if cache_path:
-        Path(cache_path).write_text(json.dumps(out, indent=1))
-    return out
-
-
 # --- the table --------------------------------------------------------------------------
 
 def parse(argv):
-    options = {'minimum': '--minimum' in argv, 'moves': None, 'set': {}, 'cache': None,
+    options = {'minimum': '--minimum' in argv, 'moves': None, 'set': {}, 'cache': ocp.CACHE,
                'latency': '--no-latency' not in argv, 'seed': '--no-seed' not in argv}
     for flag, value in zip(argv, argv[1:] + ['']):
         if flag == '--moves':
@@ -405,8 +155,11 @@ def main(argv):
               f'+ trajectory {ours.trajectory_s:.3f} s), seed {fmt(seed_run.move_s)} s',
               file=sys.stderr, flush=True)
     # Last: IPOPT leaves threads behind that would disturb the timings above.
-    minimum = (load_or_compute_minimum(arm, controller_config, moves, options['cache'])
-               if options['minimum'] else {})
+    starts = [(name, _start_configuration(
+        Move(name, start_xy, goal_xy, arm, None, None, forbidden, None)), goal_xy)
+        for name, start_xy, goal_xy in moves]
+    minimum = (ocp.suite_minimums(arm, controller_config, starts, options['cache'],
+                                  ZOH_PERIOD_S) if options['minimum'] else {})
 
     rate = controller_config.loop_rate_hz
     print(f'Moves on the default arm, {rate:g} Hz, sensor noise on; times from the goal to '

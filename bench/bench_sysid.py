@@ -37,8 +37,8 @@ import time
 BENCH = Path(__file__).resolve().parent
 sys.path[:0] = [str(BENCH), str(BENCH.parent)]       # the suites beside, the package above
 
-import bench_controller as bc  # noqa: E402
 from bench_trajectory import _start_configuration, Move, SUITE  # noqa: E402
+import in_process  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.signal import savgol_filter  # noqa: E402
 
@@ -123,12 +123,12 @@ def run_suite(controller_arm, truth, controller_config, planner, moves):
         move = Move(name, start_xy, goal_xy, truth, controller_config, None, forbidden, None)
         start_q = _start_configuration(move)
         core = ArmController(controller_arm, controller_config)
-        hand_off = bc.PlanHandOff(core, planner)
-        record = bc.simulate(controller_arm, controller_config, core,
-                             lambda t: core.submit_goal(t, *goal_xy), start_q, index, hand_off,
-                             plant_arm=truth)
+        hand_off = in_process.PlanHandOff(core, planner)
+        record = in_process.simulate(
+            controller_arm, controller_config, core, lambda t: core.submit_goal(t, *goal_xy),
+            start_q, index, hand_off, plant_arm=truth)
         goal_q = core.goals.goal_q if core.goals.goal_q is not None else np.full(2, np.nan)
-        rows.append((name, bc.measure(truth, controller_config, record, goal_q, start_q)))
+        rows.append((name, in_process.measure(truth, controller_config, record, goal_q, start_q)))
         traces.append(tuple(np.array(record[key]) for key in ('time', 'state', 'voltage')))
     return rows, traces
 

@@ -15,15 +15,26 @@ V_nominal/2). ``electrical=False`` is the ideal supply: |V| ≤ V_nominal and no
 IPOPT finds a local optimum, started from a timed trajectory (``guess_from``).
 """
 
+from dataclasses import replace
+import hashlib
+import json
 import math
+from pathlib import Path
+import sys
 
 import casadi
 import numpy as np
 
+from arm_control import config
+from arm_control.control.goals import GoalValidator
+from arm_control.control.trajectory import time_optimal_trajectory, TrajectoryLimits
 from arm_control.model.dynamics import ArmDynamics, COULOMB_SMOOTHING_RAD_S
 from arm_control.model.electrical import PowerSupply
+from arm_control.model.world import ForbiddenSpace
+from arm_control.planning.planner import Planner
 
 KNOTS = (25, 50, 100)
+CACHE = Path(__file__).resolve().parent / '.minimum_cache.json'   # suite_minimums' answers
 CONVERGED = 0.005           # relative change of the minimum time that counts as settled
 
 
@@ -232,3 +243,51 @@ def minimum_time_zoh(arm, start_q, goal_q, guess, minimum_s, period_s=0.02, subs
         except RuntimeError:
             continue
     return math.nan
+
+
+# --- the minimum of a suite of moves, cached ------------------------------------------------
+
+def suite_minimums(arm, controller_config, moves, cache_path=None, zoh_period_s=0.02):
+    """Per move (name, start_q, goal_xy): the minimum under the electrical limits, the least
+    over the goal's free elbow branches (``refined_minimum``, started from a timing with no
+    reserves), and the 50 Hz minimum on that branch: {'min_s', 'knots_s', 'goal_q', 'zoh_s'}.
+    Kept in ``cache_path`` (JSON) under the move, its start and this arm's parameters, so a
+    changed arm or start is solved again (minutes for a suite)."""
+    path = Path(cache_path) if cache_path else None
+    cache = json.loads(path.read_text()) if path and path.exists() else {}
+    digest = hashlib.sha1(repr(arm).encode()).hexdigest()[:12]
+    dynamics, forbidden = ArmDynamics(arm), ForbiddenSpace(arm)
+    planner = Planner(arm, config.load('planner')[1])
+    validator = GoalValidator(arm)
+    whole = TrajectoryLimits.from_config(arm, replace(
+        controller_config, feedback_voltage_reserve=0.0, driving_voltage_reserve=0.0))
+    out = {}
+    for name, start_q, goal_xy in moves:
+        start_q = np.asarray(start_q, float)
+        key = f'{name} | {np.round(start_q, 4).tolist()} -> {list(goal_xy)} | arm {digest}'
+        if key in cache:
+            out[name] = cache[key]
+            continue
+        best = None
+        for goal_q in validator.free_configurations(*goal_xy):
+            plan = planner.plan_to_configuration(start_q, goal_q)
+            if not plan.ok:
+                continue
+            waypoints = np.array(plan.waypoints_rad)
+            fast = time_optimal_trajectory(waypoints, dynamics, forbidden, whole)
+            knots, guess = refined_minimum(arm, start_q, waypoints[-1], guess_from(fast, arm))
+            if math.isfinite(knots[-1]) and (best is None or knots[-1] < best['min_s']):
+                best = {'min_s': knots[-1], 'knots_s': knots, 'goal_q': list(waypoints[-1]),
+                        'guess': guess}
+        if best is None:
+            best = {'min_s': math.nan, 'knots_s': [], 'goal_q': [], 'zoh_s': math.nan}
+        else:
+            best['zoh_s'] = minimum_time_zoh(arm, start_q, np.array(best['goal_q']),
+                                             best.pop('guess'), best['min_s'], zoh_period_s)
+        out[name] = cache[key] = best
+        print(f'  minimum {name}: {best["min_s"]:.3f} s (knots {KNOTS}: '
+              f'{", ".join(f"{t:.4f}" for t in best["knots_s"])}), 50 Hz: '
+              f'{best["zoh_s"]:.2f} s', file=sys.stderr, flush=True)
+        if path:
+            path.write_text(json.dumps(cache, indent=1))
+    return out
