@@ -1,0 +1,281 @@
+"""Moves as users get them: the real nodes over ROS, against the same controller in one
+process and against the minimum time (issue 18).
+
+sim, planner and controller run as separate processes on a ROS domain of their own, as the
+process tests start them (``test/arm_rig.py``). For each move of the suite
+(``bench_trajectory.SUITE``) a goal on ``/goal_point`` takes the arm to the move's start, as
+a user's would, and the arm comes to rest there; then the move's goal is published. The move
+takes from that publication until the arm came, for good, within 1° on both joints of where
+it came to rest, on ``/sim/ground_truth`` (the sim's stamps; the publication is stamped on
+the same clock). Beside it, per move, from the configuration the arm started from (to
+0.01 rad):
+
+- in one process: the same controller on the same plant in simulated time, planning after
+  the CPU time it costs (``in_process``), timed the same way;
+- the minimum: the least time over the goal's elbow branches under the limits the sim
+  imposes (current limits, the battery's sag, brownout, the floor)
+  (``minimum_time.suite_minimums``, cached in ``bench/.minimum_cache.json``);
+- where the time through ROS went, from the controller's ``goal_reached`` event: the
+  planner's round trip, the timing in the controller's worker, the hand-over, waiting to
+  start, the trajectory, and the rest (the goal's delivery, tracking and settling);
+- the lowest point of either link (mm; below 0 is in the floor).
+
+    python bench/bench_ros.py                  # the suite, idle (a few minutes)
+    python bench/bench_ros.py --load           # with two busy loops beside it
+    python bench/bench_ros.py --sim-speed 5    # in simulated time, 5x real time
+    python bench/bench_ros.py --moves 4,5 --repeats 3
+
+Needs the package built and sourced. Not a test: it prints a table and asserts nothing.
+"""
+
+import argparse
+from contextlib import nullcontext
+import math
+from pathlib import Path
+import re
+import statistics
+import sys
+import tempfile
+import time
+
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE.parent / 'test'), str(HERE)]
+
+from arm_rig import ArmRig  # noqa: E402
+from bench_trajectory import SUITE  # noqa: E402
+import busy  # noqa: E402
+from geometry_msgs.msg import PointStamped  # noqa: E402
+from in_process import PlanHandOff, simulate  # noqa: E402
+import minimum_time  # noqa: E402
+import numpy as np  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from ros_harness import Probe, ros_domain  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from arm_control import config  # noqa: E402
+from arm_control.control.controller import ArmController  # noqa: E402
+from arm_control.control.events import parse_event  # noqa: E402
+from arm_control.planning.planner import Planner  # noqa: E402
+
+SETTLED_RAD = math.radians(1.0)     # within this of where the arm came to rest
+REST_SPEED_RAD_S = 0.02             # both joints slower than this: at rest
+REST_FOR_S = 0.3                    # ... for this long
+MOVE_TIMEOUT_S = 10.0
+LOAD_BUDGET_S = 3600.0
+# The controller's goal_reached sentence: '... (error ...; planner round trip 18.9 ms, ...)'.
+PART = re.compile(r'([a-z][a-z -]*?) (-?[\d.]+) ms')
+
+
+def settled_s(times, q, start_s: float) -> float:
+    """How long after ``start_s`` the arm came within SETTLED_RAD of where it came to rest
+    (its mean over the last REST_FOR_S) and stayed; NaN when it never came to rest."""
+    times, q = np.asarray(times, float), np.asarray(q, float)
+    last = times >= times[-1] - REST_FOR_S
+    if len(times) < 3 or times[-1] - start_s < REST_FOR_S:
+        return math.nan
+    rest = q[last].mean(axis=0)
+    if np.max(np.ptp(q[last], axis=0)) > SETTLED_RAD / 4:      # still moving at the end
+        print(f'  not at rest at the end: {np.degrees(np.ptp(q[last], axis=0))} deg over '
+              f'{times[-1] - times[last][0]:.2f} s', file=sys.stderr)
+        return math.nan
+    outside = np.flatnonzero(np.any(np.abs(q - rest) > SETTLED_RAD, axis=1))
+    settled = times[outside[-1] + 1] if len(outside) else times[0]
+    return max(float(settled) - start_s, 0.0)
+
+
+def breakdown_ms(sentence: str) -> dict:
+    """{'planner round trip': ms, 'timing': ms, ...} from a goal_reached sentence."""
+    return {name.strip(): float(value) for name, value in
+            PART.findall(sentence.split(';', 1)[1] if ';' in sentence else '')}
+
+
+def lowest_mm(arm, q) -> float:
+    q = np.atleast_2d(q)
+    elbow_y = arm.shoulder.length_m * np.sin(q[:, 0])
+    tool_y = elbow_y + arm.elbow.length_m * np.sin(q[:, 0] + q[:, 1])
+    return 1000.0 * float(np.min(np.minimum(elbow_y, tool_y)))
+
+
+class RosMoves:
+    """The nodes, and the means to run one move through them."""
+
+    def __init__(self, rig: ArmRig, simulated: bool):
+        self.rig = rig
+        node = rig.probe.node
+        if simulated:
+            node.set_parameters([Parameter('use_sim_time', value=True)])
+        self.truth = []                 # (sim stamp s, shoulder, elbow)
+        node.create_subscription(JointState, '/sim/ground_truth', self.on_truth, 1000)
+
+    def on_truth(self, msg: JointState) -> None:
+        angles = dict(zip(msg.name, msg.position))
+        stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        self.truth.append((stamp, angles.get('shoulder', math.nan), angles.get('elbow', math.nan)))
+
+    def go_to(self, xy):
+        """The arm taken to ``xy`` by a goal, at rest: where it rests (rad), or None."""
+        result = self.move(xy)
+        if result['outcome'] != 'goal_reached' or not math.isfinite(result['ros_s']):
+            print(f'  could not take the arm to {xy}: {result["outcome"]} '
+                  f'{result["sentence"][:120]}', file=sys.stderr, flush=True)
+            return None
+        return result['q'][-1]
+
+    def move(self, goal_xy) -> dict:
+        """Publish the goal, wait for the arm to come to rest; the move's figures."""
+        rig = self.rig
+        began = time.monotonic()
+        del self.truth[:]
+        message = PointStamped()
+        message.header.frame_id = 'arm_base'
+        message.header.stamp = rig.probe.node.get_clock().now().to_msg()
+        published_s = message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+        message.point.x, message.point.y = float(goal_xy[0]), float(goal_xy[1])
+        rig.goal_pub.publish(message)
+        outcome = ('goal_reached', 'goal_failed', 'goal_rejected', 'estop', 'control_failed')
+        rig.spin_until(lambda: any(parse_event(e)[0] in outcome
+                                   for e in rig.event_log(began)), MOVE_TIMEOUT_S)
+
+        def at_rest():
+            recent = [row for row in self.truth if row[0] >= self.truth[-1][0] - REST_FOR_S]
+            q = np.array([row[1:] for row in recent])
+            return len(recent) > 5 and np.max(np.ptp(q, axis=0)) < math.radians(0.05)
+        rig.spin_until(lambda: len(self.truth) > 5 and at_rest(), 3.0)
+        rig.spin_for(REST_FOR_S)
+        events = [e for e in rig.event_log(began) if parse_event(e)[0] in outcome]
+        rows = np.array([row for row in self.truth if row[0] >= published_s - 0.05])
+        kind, _, sentence = parse_event(events[0]) if events else ('none', '', '')
+        return {'outcome': kind, 'sentence': sentence,
+                'ros_s': settled_s(rows[:, 0], rows[:, 1:], published_s) if len(rows) else
+                math.nan,
+                'q': rows[:, 1:] if len(rows) else np.zeros((0, 2))}
+
+
+def in_process_s(arm, controller_config, planner, start_q, goal_xy, seed) -> float:
+    """The same move in one process, timed as through ROS."""
+    core = ArmController(arm, controller_config)
+    record = simulate(arm, controller_config, core, lambda t: core.submit_goal(t, *goal_xy),
+                      start_q, seed, PlanHandOff(core, planner))
+    times, states = np.array(record['time']), np.array(record['state'])
+    return settled_s(times, states[:, :2], 0.0)
+
+
+def fmt(value, spec='.3f') -> str:
+    return '-' if value is None or not math.isfinite(value) else format(value, spec)
+
+
+def run(args) -> list:
+    arm, controller_config = config.load('controller')
+    moves = [SUITE[i] for i in args.moves] if args.moves else SUITE
+    node_args = {}
+    if args.sim_speed:
+        node_args = {'sim': ('-p', f'sim_time_factor:={args.sim_speed:g}'),
+                     'planner': ('-p', 'use_sim_time:=true'),
+                     'controller': ('-p', 'use_sim_time:=true')}
+    loops = busy.start(2, LOAD_BUDGET_S) if args.load else []
+    rows = []
+    try:
+        with ros_domain() if args.domain is None else nullcontext(args.domain) as domain:
+            probe = Probe(domain, 'bench_ros')
+            rig = ArmRig(domain, probe, Path(tempfile.mkdtemp(prefix='arm_bench_ros_')),
+                         node_args)
+            ros = RosMoves(rig, bool(args.sim_speed))
+            try:
+                rig.start_all()
+                rig.ready(90.0)
+                for name, start_xy, goal_xy in moves:
+                    for _ in range(args.repeats):
+                        start_q = ros.go_to(start_xy)
+                        result = ros.move(goal_xy) if start_q is not None else \
+                            {'outcome': 'no start', 'sentence': '', 'ros_s': math.nan}
+                        result.update(name=name, goal_xy=goal_xy, start_q=start_q)
+                        rows.append(result)
+                        print(f'  {name}: {result["outcome"]}, {fmt(result["ros_s"])} s through '
+                              'ROS', file=sys.stderr, flush=True)
+                log_dir = rig.log_dir
+            finally:
+                rig.close()
+                probe.close()
+    finally:
+        busy.stop(loops)
+    # After the nodes: IPOPT's threads and this process's planning would disturb them.
+    planner = Planner(arm, config.load('planner')[1])
+    for row in rows:
+        if row['start_q'] is None:
+            row['minimum_s'] = row['local_s'] = math.nan
+            continue
+        start_q = np.round(row['start_q'], 2)
+        index = SUITE.index(next(m for m in SUITE if m[0] == row['name']))
+        row['local_s'] = in_process_s(arm, controller_config, planner, start_q,
+                                      row['goal_xy'], index)
+        row['minimum_s'] = minimum_time.suite_minimums(
+            arm, controller_config, [(row['name'], start_q, row['goal_xy'])],
+            minimum_time.CACHE)[row['name']]['min_s']
+    print_table(arm, rows, args, log_dir)
+    return rows
+
+
+def print_table(arm, rows, args, log_dir) -> None:
+    conditions = ', '.join(filter(None, [
+        'two busy loops beside it' if args.load else 'idle',
+        f'simulated time at {args.sim_speed:g}x' if args.sim_speed else 'real time',
+        f'{args.repeats} runs a move (the median)' if args.repeats > 1 else '']))
+    print(f'\nMoves through ROS ({conditions}); node logs in {log_dir}\n')
+    print('| move | ROS s | one process s | minimum s | ROS / min | one process / min | '
+          'planner round trip ms | timing ms | hand-over + waiting ms | trajectory s | '
+          'delivery, tracking, settling ms | lowest mm |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|')
+    ratios, planning, contact = [], [], 0
+    for name in dict.fromkeys(row['name'] for row in rows):
+        runs = [row for row in rows if row['name'] == name and 'q' in row]
+        if not runs:
+            print(f'| {name} | no start | | | | | | | | | | |')
+            continue
+        ros_s = statistics.median(row['ros_s'] for row in runs)
+        parts = [breakdown_ms(row['sentence']) for row in runs
+                 if row['outcome'] == 'goal_reached']
+
+        def part(key):
+            values = [p.get(key, math.nan) for p in parts]
+            return statistics.median(values) if values else math.nan
+        known = sum(part(k) for k in ('planner round trip', 'timing', 'hand-over',
+                                      'waiting to start', 'trajectory'))
+        minimum_s = statistics.median(row['minimum_s'] for row in runs)
+        local_s = statistics.median(row['local_s'] for row in runs)
+        lowest = min(lowest_mm(arm, row['q']) for row in runs if len(row['q']))
+        contact += lowest < 0.0
+        ratios += [row['ros_s'] / row['minimum_s'] for row in runs]
+        planning += [p.get('planner round trip', math.nan) + p.get('timing', math.nan)
+                     for p in parts]
+        print(f'| {name} | {fmt(ros_s)} | {fmt(local_s)} | {fmt(minimum_s)} | '
+              f'{fmt(ros_s / minimum_s, ".2f")} | {fmt(local_s / minimum_s, ".2f")} | '
+              f'{fmt(part("planner round trip"), ".0f")} | {fmt(part("timing"), ".0f")} | '
+              f'{fmt(part("hand-over") + part("waiting to start"), ".0f")} | '
+              f'{fmt(part("trajectory") / 1000.0)} | {fmt(1000.0 * ros_s - known, ".0f")} | '
+              f'{lowest:.0f} |')
+    finite = [r for r in ratios if math.isfinite(r)]
+    bar = 1.25 if args.load else 1.10
+    if finite:
+        print(f'\nROS / minimum: median {statistics.median(finite):.2f}, worst '
+              f'{max(finite):.2f}; within {bar:.2f}x: {sum(r <= bar for r in finite)} of '
+              f'{len(ratios)} runs. Floor contact on {contact} moves.')
+    planned = [p for p in planning if math.isfinite(p)]
+    if planned:
+        print(f'Planning per goal through ROS (planner round trip + timing): median '
+              f'{statistics.median(planned):.0f} ms, p95 {np.percentile(planned, 95):.0f} ms.')
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--load', action='store_true', help='two busy loops throughout')
+    parser.add_argument('--sim-speed', type=float, default=0.0,
+                        help='run in simulated time, this many times real time')
+    parser.add_argument('--moves', type=lambda text: [int(i) for i in text.split(',')],
+                        help='indices into the suite, e.g. 4,5')
+    parser.add_argument('--repeats', type=int, default=1, help='runs of each move')
+    parser.add_argument('--domain', type=int, help='a ROS domain reserved for you')
+    run(parser.parse_args())
+
+
+if __name__ == '__main__':
+    main()
