@@ -46,11 +46,11 @@ class PeriodFeedforward:
     def reset(self) -> None:
         self.state = None
 
-    def _simulate(self, x, volts, duration_s, applied=True):
+    def _simulate(self, x, volts, duration_s, applied=True, substep_s=None):
         """States (P, 4) after holding each of ``volts`` (P, k, 2) for ``duration_s`` in
         turn, as the motor controllers apply them (``applied``; else as they are), by RK4
         on steps of at most ``substep_s`` (``ArmDynamics.derivatives``)."""
-        steps = max(1, math.ceil(duration_s / self.substep_s - 1e-9))
+        steps = max(1, math.ceil(duration_s / (substep_s or self.substep_s) - 1e-9))
         h = duration_s / steps
         x = np.array(x, float)
 
@@ -92,9 +92,10 @@ class PeriodFeedforward:
         trials[1:] += delta * np.eye(4)
         # The Newton step in the model alone: where the motor controllers would lower a
         # command, its column of the Jacobian vanishes and the other joint's volts would be
-        # bent to make up for it through the coupling.
+        # bent to make up for it through the coupling. One RK4 step a period is enough for
+        # the step (the reference itself moves on finer ones): half the loop's CPU.
         ends = self._simulate(np.tile(self.state, (5, 1)), trials.reshape(5, 2, 2), period,
-                              applied=False)
+                              applied=False, substep_s=period)
         jacobian = (ends[1:] - ends[0]).T / delta
         try:
             guess = guess - np.linalg.solve(jacobian, ends[0] - target)
