@@ -116,6 +116,11 @@ class EventLog:
             self._counted = {}
         self._window_start_s, self._window_rejections = now_s, 0
 
+    @property
+    def waiting(self) -> bool:
+        """Events not yet taken."""
+        return bool(self._new)
+
     def take(self) -> list[Event]:
         """Events since the last call (for the node to log and publish)."""
         out, self._new = self._new, []

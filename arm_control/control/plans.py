@@ -222,6 +222,11 @@ class PlanHandoff:
         self._next_id += 1
         self.pending, self._outbox = request, [request]
 
+    @property
+    def waiting(self) -> bool:
+        """Requests not yet taken."""
+        return bool(self._outbox)
+
     def take(self) -> list[PlanRequest]:
         """Requests to send to the planner (each once)."""
         out, self._outbox = self._outbox, []

@@ -232,12 +232,16 @@ class ControllerNode(Node):
                                 cut_power=True)
                 voltage = np.zeros(2)
             estimate, setpoint = self.core.estimate, self.core.setpoint
+            said = (self.core.events.waiting or self.core.goals.plans.waiting
+                    or self.core.state != self.last_state
+                    or self.core.goals.queue.version != self.last_queue_version)
         if estimate is not None:     # before the first reading there is nothing to command
             self.voltage_pub.publish(Float64MultiArray(data=[float(v) for v in voltage]))
             stamp = self.get_clock().now().to_msg()
             self.setpoint_pub.publish(messages.joint_state(stamp, setpoint[0], setpoint[1]))
             self.estimate_pub.publish(messages.joint_state(stamp, estimate[:2], estimate[2:]))
-        self.outputs.trigger()
+        if said:                                    # the executor publishes what changed
+            self.outputs.trigger()
         if self.last_tick_s is not None:
             self.loop_periods_s.append(now - self.last_tick_s)
         self.last_tick_s = now
