@@ -169,6 +169,16 @@ def _parameters_without_value(argv) -> list:
     return names
 
 
+_stopping = False                  # a SIGINT or SIGTERM came (``interrupt``)
+
+
+def interrupt(signum, frame):
+    """SIGINT and SIGTERM as Ctrl-C, for a node that cleans up itself (``on_shutdown``)."""
+    global _stopping
+    _stopping = True
+    raise KeyboardInterrupt
+
+
 def run(node_class, args=None) -> int:
     """The Jazzy main() shape: construct, spin, clean up on every exit path.
 
@@ -195,9 +205,10 @@ def run(node_class, args=None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
-        if rclpy.ok():
+        if rclpy.ok() and not _stopping:
             raise
-        # Ctrl-C shut the context down beneath a callback still running: that is shutdown.
+        # Ctrl-C shut the context down beneath a callback still running, or came in the
+        # middle of taking a message (rclpy then says it could not convert it): shutdown.
     finally:
         if node is not None:
             shutdown = getattr(node, 'on_shutdown', None)

@@ -38,9 +38,9 @@ from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health
 from arm_control.control.sensing import SensorReading
 from arm_control.nodes import messages, realtime
-from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, LATCHED,
-                                      loop_statistics, PLANNER_AVAILABLE, run, STATE_STREAM,
-                                      status)
+from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
+                                      LATCHED, loop_statistics, PLANNER_AVAILABLE, run,
+                                      STATE_STREAM, status)
 from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.plan_link import PlanLink
 from arm_control.parameters import ParameterError
@@ -322,16 +322,12 @@ class ControllerNode(Node):
             self.get_logger().warning(f'could not send 0 V on shutdown: {error}')
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
 def controller_node() -> ControllerNode:
     """The node, with SIGINT and SIGTERM handed back to Python: rclpy's own handlers shut
     the context down before ``on_shutdown`` runs, so the last 0 V could not go out."""
     uninstall_signal_handlers()
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGINT, interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
     return ControllerNode()
 
 

@@ -29,7 +29,7 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, Header
 
 from arm_control.config import ArmConfig, JOINT_NAMES
-from arm_control.nodes.common import COMMANDS, declare_parameters, run, STATE_STREAM
+from arm_control.nodes.common import COMMANDS, declare_parameters, interrupt, run, STATE_STREAM
 from arm_control.nodes.messages import finite, joint_pair
 from arm_control.sysid.log import Log, LogWriter, read_log
 from arm_control.sysid.report import identify
@@ -304,10 +304,6 @@ class SysIdNode(Node):
             self.send_zero_volts()
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
 class _Started:
     node = None
 
@@ -315,8 +311,8 @@ class _Started:
 def sysid_node() -> SysIdNode:
     """The node, with SIGINT and SIGTERM handed back to Python so that 0 V goes out first."""
     uninstall_signal_handlers()
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGINT, interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
     _Started.node = SysIdNode()
     return _Started.node
 
