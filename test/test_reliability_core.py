@@ -3,7 +3,8 @@
 - commanding ends within ``joint_state_timeout_s`` of the last reading, not a period later;
 - an arm put elsewhere (a reset sim: the sensors leap) is held where it now is;
 - an arm that cannot follow (a forearm far heavier than the model) is e-stopped by the
-  tracking-error rule -- its fall is not mistaken for the arm having been put elsewhere.
+  tracking-error rule -- its fall is not mistaken for the arm having been put elsewhere;
+- an arm frozen with its sensors (a paused simulator) goes on along its plan.
 """
 
 import dataclasses
@@ -18,6 +19,8 @@ from arm_control.control.events import EventKind as Kind
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.model.plant import ArmPlant
+from arm_control.model.world import ForbiddenSpace
+from arm_control.planning.planner import Planner
 
 START = (1.5708, -1.5708)
 
@@ -113,3 +116,31 @@ def test_bunched_readings_are_not_a_leap(arm, controller_config):
     said = [e.kind for e in core.events.take()]
     assert core.state == ArmState.ESTOPPED, said
     assert Kind.CONTROL_FAILED in said and Kind.ARM_MOVED not in said
+
+
+def test_a_stall_that_froze_the_arm_too_goes_on_along_its_plan(arm, controller_config):
+    """A paused simulator freezes the arm with its sensors: 0 V while they are away, and
+    when they return with the arm still moving on its plan, the plan goes on (braking to a
+    halt there would carry the arm over the top into the floor behind)."""
+    core = ArmController(arm, controller_config, Planner(arm, config.load('planner')[1]))
+    plant = ArmPlant(arm, START, seed=5)
+    period_s = 1.0 / controller_config.loop_rate_hz
+    core.submit_goal(plant.time_s, -1.0, 1.0)                  # front to back, over the top
+    run(core, plant, 2.0, period_s, until=lambda: core.state == ArmState.TRACKING)
+    run(core, plant, 0.4, period_s)
+    moving = np.array(plant.state)
+    assert np.max(np.abs(moving[2:])) > 1.0
+    clock_s = plant.time_s
+    for _ in range(round(1.5 / period_s)):                      # frozen: no time for the arm
+        core.step(clock_s, None)
+        clock_s += period_s
+    assert core.state == ArmState.NO_SENSORS
+    lowest, offset = [], clock_s - plant.time_s
+    for _ in range(round(3.0 / period_s)):
+        plant.set_voltage(core.step(plant.time_s + offset, plant.read()))
+        plant.advance(period_s)
+        lowest.append(ForbiddenSpace(arm).lowest_point_m(np.array(plant.state[:2])[None])[0])
+    said = [str(e) for e in core.events.take()]
+    assert any('still on its plan' in e for e in said if e.startswith('sensors_back')), said
+    assert any(e.startswith('goal_reached') for e in said), said
+    assert min(lowest) >= 0.0

@@ -221,9 +221,8 @@ class ArmController:
     def step(self, now_s: float, reading=None, reading_time_s: Optional[float] = None):
         """One control period: returns [Va, Vb] to apply until the next one.
 
-        ``reading``: the sensors' latest sample if one arrived since the last step (an
-        ``ArmPlant`` Reading or a ``SensorReading``), else None; ``reading_time_s`` when it
-        was taken (default now).
+        ``reading``: the sensors' latest sample since the last step (a ``SensorReading``, or
+        a plant's Reading), else None; ``reading_time_s``: when it was taken (default now).
         """
         dt_s = self.period_s if self.last_step_s is None else max(now_s - self.last_step_s, 0.0)
         self.last_step_s = now_s
@@ -261,8 +260,8 @@ class ArmController:
             self.estop(now_s, f'no joint states for {age_s:.3f} s while holding', cut_power=True)
         if fresh and self.state == S.NO_SENSORS:
             self.machine.fire(T.SENSORS_BACK)
-            self._say(now_s, Kind.SENSORS_BACK, 'info',
-                      f'joint states arriving: {self._resume(now_s)}')
+            self._say(now_s, Kind.SENSORS_BACK, 'info', 'joint states arriving: '
+                      f'{self._resume(now_s, lost=self.setpoints.timeline.last)}')
         if self.state in STOPPED:
             self.sensing.jumped = False
             self.setpoints.prune(now_s)
@@ -322,9 +321,10 @@ class ArmController:
                   f'the arm is not where it was (moved, or the sim reset) at '
                   f'({q[0]:.1f}, {q[1]:.1f}) deg: {self._resume(now_s)}')
 
-    def _resume(self, now_s: float) -> str:
+    def _resume(self, now_s: float, lost=None) -> str:
         """Take control back after 0 V (``SafetyRules.resume``); says what it does."""
-        motion, what = self.safety.resume(now_s, self._rest_q().copy(), self.commanded_q)
+        state = self.sensing.state if self.sensing.started else np.zeros(4)
+        motion, what = self.safety.resume(now_s, state, self.commanded_q, lost)
         self.resume_motion = motion
         self.setpoints.driving = False
         self.setpoints.schedule(motion)

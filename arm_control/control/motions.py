@@ -55,6 +55,26 @@ class Motion:
     def finished(self, now_s: float) -> bool:
         return now_s >= self.end_s
 
+    def rejoined(self, now_s: float, q, qd, position_rad: float, speed_rad_s: float,
+                 moving_rad_s: float = 0.3, step_s: float = 0.005) -> Optional['Motion']:
+        """The same trajectory, shifted in time to pass through (q, q̇) at ``now_s``, when it
+        passes within ``position_rad`` and ``speed_rad_s`` of it and the arm is moving
+        (faster than ``moving_rad_s``); else None. A stall that froze the arm along with its
+        sensors (a paused simulator) leaves it near its plan, moving along it."""
+        trajectory = getattr(self, 'trajectory', None)      # braking and holds: no plan
+        if trajectory is None or trajectory.duration_s <= 0.0:
+            return None
+        times = np.arange(0.0, trajectory.duration_s, step_s)
+        samples = [trajectory.sample(t)[:2] for t in times]
+        position = np.array([s[0] for s in samples]) - np.asarray(q, float)
+        speed = np.array([s[1] for s in samples]) - np.asarray(qd, float)
+        close = (np.max(np.abs(position), axis=1) <= position_rad) & \
+            (np.max(np.abs(speed), axis=1) <= speed_rad_s)
+        if not np.any(close) or np.max(np.abs(qd)) <= moving_rad_s:   # at rest: hold instead
+            return None
+        best = np.flatnonzero(close)[np.argmin(np.max(np.abs(position[close]), axis=1))]
+        return Motion(trajectory, now_s - times[best])
+
 
 class StoppingMotion(Motion):
     """Brake to rest along the path a motion was following (a path known to be free).

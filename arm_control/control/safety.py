@@ -4,7 +4,9 @@ E-stop at 0 V when control itself has failed: the tracking error stays above
 ``tracking_error_limit_rad`` for ``tracking_error_time_s`` (a dead motor, an arm that cannot
 follow), or a joint reads past its hard stop by more than noise allows.
 
-Resuming after a period at 0 V (an e-stop, a disable, lost sensors), the arm has sagged. It
+Resuming after a period at 0 V (an e-stop, a disable, lost sensors), the arm has sagged. When
+the sensors alone stalled and the arm is still moving along the plan it was on (a paused
+simulator froze both), that plan goes on from where the arm is on it. Otherwise the arm
 goes back to where it was last commanded when that is near and the way there is free, so
 that bursts of cuts cannot ratchet it down; otherwise it holds where it is, lifted clear by
 the shortest straight move first if it sagged within ``world.clearance_rad`` of forbidden
@@ -25,6 +27,10 @@ from arm_control.model.world import ForbiddenSpace
 JOINT_LIMIT_MARGIN_RAD = 0.01
 # Back to where it was last commanded from at most this far (a sag, not a fall).
 RETURN_REACH_RAD = 0.15
+# Still on its plan: within this of a point of it, and of its velocity there. (Through ROS, a
+# paused sim leaves the arm 2-4 deg and 1-1.2 rad/s off it: the sim catches up 0.1 s, then
+# applies the 0 V sent meanwhile until the controller's next command.)
+REJOIN_RAD, REJOIN_RAD_S = math.radians(5.0), 1.5
 # A hold is lifted clear of forbidden space only from this near it: deeper in, the way out
 # is the planner's.
 LIFT_REACH_RAD = 0.35
@@ -68,11 +74,15 @@ class SafetyRules:
                 f'{math.degrees(self.config.tracking_error_limit_rad):.1f} deg for '
                 f'{self.config.tracking_error_time_s:g} s')
 
-    def resume(self, now_s: float, q, commanded_q) -> tuple[Motion, str]:
-        """The motion that takes control back at ``q`` (the estimate), last commanded at
-        ``commanded_q`` (None if never), and a sentence saying what it does."""
-        q = np.asarray(q, float)
+    def resume(self, now_s: float, state, commanded_q, lost=None) -> tuple[Motion, str]:
+        """The motion that takes control back at ``state`` (the estimate [q, q̇]), last
+        commanded at ``commanded_q`` (None if never), and a sentence saying what it does;
+        ``lost``: the motion the sensors were lost on, when that is why control stopped."""
+        q, qd = np.asarray(state[:2], float), np.asarray(state[2:], float)
         self.over_limit_since_s = None
+        again = lost.rejoined(now_s, q, qd, REJOIN_RAD, REJOIN_RAD_S) if lost else None
+        if again is not None:
+            return again, 'still on its plan, which goes on from there'
         if commanded_q is not None:
             commanded_q = np.asarray(commanded_q, float)
             sag = float(np.max(np.abs(commanded_q - q)))

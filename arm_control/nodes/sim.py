@@ -9,8 +9,9 @@ Subscribes ``voltage_command`` (Float64MultiArray [shoulder_V, elbow_V]) and ``~
 
 A command acts from when it arrives: the physics is brought up to that instant with the
 previous one first. No command for ``command_timeout_s`` -> 0 V, as a disabled robot. The
-sim's own stalls (a loaded machine) are not the robot's: the time they cover is simulated
-with the command the robot had, up to ``MAX_CATCH_UP_S``.
+sim's own late ticks (a loaded machine) are not the robot's: up to ``MAX_CATCH_UP_S`` the
+time they cover is simulated with the command the robot had; a longer stall (the process
+paused) is a pause of the whole world, and the arm goes on from where it was.
 
 With ``sim_time_factor`` > 0 the sim owns time: it publishes ``/clock`` and advances the
 physics one period per tick of a wall-clock timer ``sim_time_factor`` times faster than real
@@ -38,7 +39,7 @@ from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, loop_statistics, run,
                                       STATE_STREAM, status)
 
-# After a stall the physics catches up at most this far; beyond, the arm waits.
+# Late ticks up to this are caught up; a longer stall is a pause of the world.
 MAX_CATCH_UP_S = 0.1
 # In simulated time, a period waits at most this long (real time) for the last one's command.
 LOCKSTEP_WAIT_S = 0.5
@@ -113,9 +114,9 @@ class SimNode(Node):
         if self.simulated_time:
             return                                    # time is the physics' own
         behind_s = now_s - self.clock_origin_s - self.plant.time_s
-        if behind_s > MAX_CATCH_UP_S:                 # a long stall: the arm waited
-            self.clock_origin_s += behind_s - MAX_CATCH_UP_S
-            behind_s = MAX_CATCH_UP_S
+        if behind_s > MAX_CATCH_UP_S:                 # a long stall: the world waited
+            self.clock_origin_s += behind_s
+            behind_s = 0.0
         steps = math.floor(behind_s / self.plant.physics_step_s + 1e-9)
         self.plant.advance(steps * self.plant.physics_step_s)
 
