@@ -1,8 +1,9 @@
 """Draw the package's layers and the imports between them, from the code as it is.
 
 Each room is a folder of ``arm_control/`` (or a module at its top), on the floor its layer
-gives it: the parameter files and the arm description at the bottom, the model with the
-world, control and planning on it, then what people see and the node shells on top. An
+gives it: the parameter files, the arm description and the logs at the bottom, the model
+with the world, control, planning, identification and the FRC side on it, then what people
+see and the node shells on top. An
 arrow is the imports from one room to another (their count); one that runs up a floor, or
 sideways between two node shells, is drawn red and listed under the picture.
 
@@ -21,10 +22,11 @@ matplotlib.use('Agg')
 from matplotlib import patches, pyplot  # noqa: E402
 
 # Floor of each room (higher imports lower), and what it holds, for the picture.
-LAYERS = {'parameters': 0, 'config': 1, 'model': 2, 'control': 3, 'planning': 3,
-          'visual': 4, 'bringup': 5, 'nodes': 5}
+LAYERS = {'parameters': 0, 'config': 1, 'logs': 1, 'model': 2, 'control': 3, 'planning': 3,
+          'sysid': 3, 'frc': 3, 'visual': 4, 'bringup': 5, 'nodes': 5}
 # Modules of nodes/ that are executables: a shell importing another shell is sideways.
-SHELLS = {'sim', 'controller', 'planner', 'tour', 'viewer', 'markers', 'recorder'}
+SHELLS = {'sim', 'controller', 'planner', 'tour', 'viewer', 'markers', 'recorder',
+          'frc_bridge', 'sysid'}
 # What draws does not run the loop or plan.
 RUNS_THE_LOOP = ('control.controller', 'control.arm_controller', 'control.closed_loop',
                  'planning.planner')

@@ -1,4 +1,4 @@
-"""What bench/attacks.py reads from what it hears: known answers, no ROS traffic.
+"""What the attack bench (bench/attack_rig.py) reads from what it hears: known answers.
 
 - the lowest point of either link, for configurations whose answer is plain geometry;
 - the loop period from arrival times, a silence at the end of the window counted;
@@ -15,13 +15,13 @@ import time
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
 
-import attacks  # noqa: E402
+import attack_rig  # noqa: E402
 import busy  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-UPPER_M, FORE_M = attacks.ARM.shoulder.length_m, attacks.ARM.elbow.length_m
-TIMEOUT_S = attacks.SIM.command_timeout_s
+UPPER_M, FORE_M = attack_rig.ARM.shoulder.length_m, attack_rig.ARM.elbow.length_m
+TIMEOUT_S = attack_rig.SIM.command_timeout_s
 
 
 class NoNode:
@@ -39,20 +39,20 @@ class NoNode:
     (-math.pi / 2, 0.0, -UPPER_M - FORE_M),                # straight down
 ])
 def test_lowest_point_of_either_link(shoulder, elbow, lowest_m):
-    assert attacks.y_lowest_m(shoulder, elbow) == pytest.approx(lowest_m, abs=1e-12)
+    assert attack_rig.y_lowest_m(shoulder, elbow) == pytest.approx(lowest_m, abs=1e-12)
 
 
 def test_period_counts_the_silence_at_the_end():
     arrivals = list(np.arange(0.0, 2.001, 0.02)) + [2.15]    # a 150 ms gap, then silence
-    p50, p99, worst, count = attacks.period_ms(arrivals, 0.0, 3.0)
+    p50, p99, worst, count = attack_rig.period_ms(arrivals, 0.0, 3.0)
     assert p50 == pytest.approx(20.0)
     assert worst == pytest.approx(850.0)                   # 2.15 s to the window's end
     assert count == len(arrivals)
-    assert attacks.period_ms(arrivals, 0.0, 2.15)[2] == pytest.approx(150.0)
+    assert attack_rig.period_ms(arrivals, 0.0, 2.15)[2] == pytest.approx(150.0)
 
 
 def test_lowest_point_while_commanding_leaves_out_estopped_and_stale_commands():
-    heard = attacks.Listener(NoNode())
+    heard = attack_rig.Listener(NoNode())
     heard.states = [(0.0, 'holding'), (2.0, 'estopped'), (3.0, 'holding')]
     heard.voltage_s = list(np.arange(0.0, 4.0, 0.02))
     del heard.voltage_s[200 - 50:200 - 20]                  # no command from 3.0 s to 3.6 s
@@ -63,14 +63,14 @@ def test_lowest_point_while_commanding_leaves_out_estopped_and_stale_commands():
     stale = 3.0 + TIMEOUT_S + 0.05
     heard.truth.append((stale, -math.pi / 2, 0.0))           # no fresh command: overall only
     heard.truth.sort()
-    commanding, overall, where = attacks.lowest_points_mm(heard, 0.0, 4.0)
+    commanding, overall, where = attack_rig.lowest_points_mm(heard, 0.0, 4.0)
     assert commanding == pytest.approx(0.0, abs=1e-9)
     assert where == (1.0, 'holding')
     assert overall == pytest.approx(-1000.0 * (UPPER_M + FORE_M))
 
 
 def test_events_that_answer_a_goal():
-    heard = attacks.Listener(NoNode())
+    heard = attack_rig.Listener(NoNode())
     for text in ['goal_queued: goal (1.100, 0.900) m queued (1 waiting)',
                  "goal_accepted: goal preset 'mid_score' accepted: next",
                  'goal_rejected (wrong frame): goal rejected: goal (1.0, 1.0) m is in frame map',
@@ -79,7 +79,7 @@ def test_events_that_answer_a_goal():
                  'goal_failed: goal (1.0, 1.0) m failed: the planner did not answer',
                  'goal_reached: reached (1.100, 0.900) m 0.35 s after starting it',
                  'cancelled: cancelled: 3 goals dropped; holding']:
-        heard.on_event(attacks.String(data=text), {'received_timestamp': 10**9})
+        heard.on_event(attack_rig.String(data=text), {'received_timestamp': 10**9})
     assert [kind for _, kind, _, _ in heard.events][:4] == \
         ['goal_queued', 'goal_accepted', 'goal_rejected', 'goal_rejected']
     assert heard.answers(0.0) == 4 + 25
