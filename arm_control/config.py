@@ -219,7 +219,7 @@ class SimConfig:
     rest_until_first_command: bool
     random_seed: int
     sim_time_factor: float          # 0: the node's clock; else /clock at this × real time
-    realtime_priority: int          # SCHED_FIFO priority of the sim's threads; 0: normal
+    realtime_priority: int          # SCHED_FIFO priority of the stepping thread; 0: normal
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'SimConfig':
@@ -241,7 +241,7 @@ class ControllerConfig:
     """The controller's loop, tolerances, limits, gains and safety rules."""
 
     loop_rate_hz: float
-    realtime_priority: int          # SCHED_FIFO priority of the loop (the rest 1 below); 0: off
+    realtime_priority: int          # SCHED_FIFO priority of the loop's thread; 0: normal
     goal_tolerance_rad: float
     settled_velocity_rad_s: float
     dwell_s: float

@@ -17,9 +17,9 @@ class ControlLoop:
     """Calls ``tick()`` every ``period_s`` of ``clock`` time, and at once when poked;
     ``priority_problem`` says why the thread could not run at ``realtime_priority``."""
 
-    def __init__(self, clock, period_s: float, tick, realtime_priority: int = 0):
+    def __init__(self, clock, period_s: float, tick, realtime_priority: int = 0, warn=print):
         self.clock, self.period_s, self.tick = clock, period_s, tick
-        self.realtime_priority = realtime_priority
+        self.realtime_priority, self.warn = realtime_priority, warn
         self.priority_problem = None
         self._wake = threading.Event()
         self._stopping = False
@@ -46,6 +46,8 @@ class ControlLoop:
 
     def _run(self) -> None:
         self.priority_problem = raise_this_thread(self.realtime_priority)
+        if self.priority_problem:
+            self.warn(self.priority_problem)
         due_s = self.now_s()
         while not self._stopping:
             now = self.now_s()

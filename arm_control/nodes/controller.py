@@ -37,7 +37,7 @@ from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health
 from arm_control.control.sensing import SensorReading
-from arm_control.nodes import messages, realtime
+from arm_control.nodes import messages
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
                                       LATCHED, loop_statistics, PLANNER_AVAILABLE, run,
                                       STATE_STREAM, status)
@@ -103,16 +103,13 @@ class ControllerNode(Node):
                                                     self.plans.ready()))
         self.create_timer(1.0, self.publish_diagnostics)
         priority = self.config.realtime_priority
-        self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority)
+        self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
+                                self.get_logger().warning)
         self.publish_outputs()
-        # The threads there are now (executor, DDS, plan results) one step below the loop.
-        problem = realtime.raise_process(priority - 1)
         self.loop.start()
         self.get_logger().info(f'controlling the arm at {self.config.loop_rate_hz:g} Hz'
                                f'{f" at real-time priority {priority}" if priority else ""}; '
                                'waiting for joint_states')
-        if problem:
-            self.get_logger().warning(problem)
 
     def now_s(self) -> float:
         return self.loop.now_s()

@@ -92,7 +92,7 @@ class SimNode(Node):
             self.create_timer(self.period_s, self.step)
             self.create_timer(1.0, self.publish_diagnostics)
         priority = self.config.realtime_priority
-        self.priority_problem = realtime.raise_process(priority)    # its DDS threads too
+        self.priority_problem = realtime.raise_this_thread(priority)   # the one that steps
         self.get_logger().info(
             f'simulating the arm at {self.config.publish_rate_hz:g} Hz from '
             f'[{self.config.initial_position[0]:.3f}, {self.config.initial_position[1]:.3f}] rad'
