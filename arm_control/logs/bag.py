@@ -59,7 +59,7 @@ def _interface_file(type_name: str, suffix: str) -> Path:
     try:
         from ament_index_python.packages import get_package_share_directory
         shares = [Path(get_package_share_directory(package))]
-    except (ImportError, LookupError, ValueError):
+    except (ImportError, LookupError, ValueError, OSError):     # OSError: no ament prefix
         shares = []
     shares.append(Path(sys.prefix) / 'share' / package)
     for share in shares:
