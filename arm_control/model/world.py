@@ -205,7 +205,9 @@ class ForbiddenSpace:
     def why_forbidden(self, q) -> str | None:
         """A sentence saying why q is forbidden, or None when it is free."""
         q = np.asarray(q, dtype=float)
-        if self.margin_rad > 0.0 and self._free(q) and not self.is_free(q):
+        if self.is_free(q):             # the common case, at the cost of one batch check
+            return None
+        if self.margin_rad > 0.0 and self._free(q):
             return f'within {math.degrees(self.margin_rad):.1f} deg of forbidden space'
         for joint, angle, (low, high) in zip(self.arm.joints, q, self.limits):
             if not low <= angle <= high:

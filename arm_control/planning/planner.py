@@ -119,21 +119,36 @@ class Planner:
             return Plan.failure(
                 f'the goal ({goal_xy[0]:.3f}, {goal_xy[1]:.3f}) m is forbidden on both elbow '
                 f'branches: {"; ".join(refusals)}')
-        return self._search(start, goals)
+        return self._search(start, goals)[0]
 
     def plan_to_configuration(self, start_q, goal_q) -> Plan:
         """From ``start_q`` to the configuration ``goal_q`` (taken into the joint travel)."""
+        return self.plan_to_configurations(start_q, [goal_q])[0]
+
+    def plan_to_configurations(self, start_q, goals_q) -> list[Plan]:
+        """``plan_to_configuration`` to each of ``goals_q`` (e.g. a goal's elbow branches):
+        one grid search serves them all."""
         start = self._start(start_q)
         if isinstance(start, Plan):
-            return start
-        goal_q = np.asarray(goal_q, dtype=float).ravel()
-        if goal_q.shape != (2,) or not np.all(np.isfinite(goal_q)):
-            return Plan.failure(f'the goal configuration must be two finite angles, '
-                                f'got {goal_q.tolist()}')
-        goal, why = self._goal(goal_q)
-        if why is not None:
-            return Plan.failure(f'the goal configuration {_degrees(goal_q)} is forbidden: {why}')
-        return self._search(start, [goal])
+            return [start] * len(goals_q)
+        plans, goals, where = [], [], []
+        for goal_q in goals_q:
+            goal_q = np.asarray(goal_q, dtype=float).ravel()
+            if goal_q.shape != (2,) or not np.all(np.isfinite(goal_q)):
+                plans.append(Plan.failure(f'the goal configuration must be two finite angles, '
+                                          f'got {goal_q.tolist()}'))
+                continue
+            goal, why = self._goal(goal_q)
+            if why is not None:
+                plans.append(Plan.failure(f'the goal configuration {_degrees(goal_q)} is '
+                                          f'forbidden: {why}'))
+                continue
+            plans.append(None)
+            goals.append(goal)
+            where.append(len(plans) - 1)
+        for k, plan in zip(where, self._search(start, goals, each=True) if goals else []):
+            plans[k] = plan
+        return plans
 
     # Ends
 
@@ -167,71 +182,91 @@ class Planner:
         coarse = self.forbidden.segment_is_free(q_from, q_to, coarse_factor * step)
         return coarse and self.forbidden.segment_is_free(q_from, q_to, step)
 
-    def _search(self, start: np.ndarray, goals: list[np.ndarray]) -> Plan:
+    def _search(self, start: np.ndarray, goals: list[np.ndarray], each: bool = False):
+        """[the plan to the cheapest of ``goals``], or with ``each`` a plan to each of them,
+        from one grid search (a start inside forbidden space: one search per goal, each
+        with its own way out)."""
+        if each and len(goals) > 1 and not self.forbidden.is_free(start):
+            return [self._search(start, [goal])[0] for goal in goals]
+        groups = [[k] for k in range(len(goals))] if each else [list(range(len(goals)))]
         start_free = bool(self.forbidden.is_free(start))
         lower_bounds = [float(np.abs(goal - start).sum()) for goal in goals]
+        plans = [None] * len(groups)
         if start_free:
             # A free straight segment costs exactly the lower bound |Δθa| + |Δθb|.
-            direct = [k for k, goal in enumerate(goals) if self.segment_is_free(start, goal)]
-            if direct:
-                best = min(direct, key=lambda k: lower_bounds[k])
-                if lower_bounds[best] <= min(lower_bounds):
-                    return Plan.through([start, goals[best]])
+            direct = [self.segment_is_free(start, goal) for goal in goals]
+            for g, members in enumerate(groups):
+                best = min(members, key=lambda k: (not direct[k], lower_bounds[k]))
+                if direct[best] and lower_bounds[best] <= min(lower_bounds[k] for k in members):
+                    plans[g] = Plan.through([start, goals[best]])
+        if all(plans):
+            return plans
 
         grid = self.grid
-        goal_links = [grid.connections(goal, toward=True) for goal in goals]
-        goal_labels = {int(label) for nodes, _ in goal_links
-                       for label in grid.components[nodes]}
-        if not goal_labels:
-            return Plan.failure(
-                'no connection: the free space around the goal is narrower than the planner '
-                f'grid ({math.degrees(grid.resolution_rad):.2f} deg); try a finer '
-                'grid_resolution_rad')
+        links = [grid.connections(goal, toward=True) for goal in goals]
+        labels = [{int(label) for k in members for label in grid.components[links[k][0]]}
+                  for members in groups]
+        narrow = Plan.failure(
+            'no connection: the free space around the goal is narrower than the planner grid '
+            f'({math.degrees(grid.resolution_rad):.2f} deg); try a finer grid_resolution_rad')
+        plans = [plan or (None if labels[g] else narrow) for g, plan in enumerate(plans)]
+        open_groups = [g for g, plan in enumerate(plans) if plan is None]
+        if not open_groups:
+            return plans
         escape = None
         if start_free:
             source_nodes, source_costs = grid.connections(start, toward=False)
             if len(source_nodes) == 0:
-                return Plan.failure(
+                boxed = Plan.failure(
                     f'no connection: the start {_degrees(start)} is boxed in by forbidden '
                     'space closer than the planner grid reaches')
+                return [plan or boxed for plan in plans]
         else:
-            escape = self._way_out(start, goal_labels)
+            escape = self._way_out(start, set().union(*(labels[g] for g in open_groups)))
             if escape is None:
-                return Plan.failure(
+                trapped = Plan.failure(
                     f'no connection: the start {_degrees(start)} is in forbidden space '
                     f'({self.forbidden.why_forbidden(start)}) and no free configuration '
                     'connected to the goal exists')
+                return [plan or trapped for plan in plans]
             source_nodes = np.array([escape])
             source_costs = np.abs(grid.configurations[escape] - start).sum(keepdims=True)
-        if not goal_labels & {int(label) for label in grid.components[source_nodes]}:
-            return Plan.failure(
-                f'no connection: forbidden space separates the start {_degrees(start)} from '
-                'the goal; no collision-free path joins them')
-
-        targets = np.concatenate([nodes for nodes, _ in goal_links])
-        target_costs = np.concatenate([costs for _, costs in goal_links])
-        which_goal = np.repeat(np.arange(len(goals)), [len(nodes) for nodes, _ in goal_links])
+        source_labels = {int(label) for label in grid.components[source_nodes]}
+        separated = Plan.failure(
+            f'no connection: forbidden space separates the start {_degrees(start)} from the '
+            'goal; no collision-free path joins them')
+        for g in open_groups:
+            if not labels[g] & source_labels:
+                plans[g] = separated
+        open_groups = [g for g in open_groups if plans[g] is None]
+        if not open_groups:
+            return plans
+        targets = [(np.concatenate([links[k][0] for k in groups[g]]),
+                    np.concatenate([links[k][1] for k in groups[g]])) for g in open_groups]
+        # Most detours cost well under half as much again as the straight move.
+        guess = SEARCH_GUESS_FACTOR * max(min(lower_bounds[k] for k in groups[g])
+                                          for g in open_groups) + SEARCH_GUESS_MARGIN_RAD
         try:
-            # Most detours cost well under half as much again as the straight move.
-            guess = SEARCH_GUESS_FACTOR * min(lower_bounds) + SEARCH_GUESS_MARGIN_RAD
-            found = grid.shortest_path(source_nodes, source_costs, targets, target_costs,
-                                       self.search, MAX_SEARCHES, guess)
+            found = grid.shortest_path_each(source_nodes, source_costs, targets, self.search,
+                                            MAX_SEARCHES, guess)
         except RuntimeError:
-            return Plan.failure('no connection found: too many grid edges turned out blocked '
-                                'by thin forbidden regions; try a finer grid_resolution_rad')
-        if found is None:
-            return Plan.failure(
-                f'no connection: forbidden space separates the start {_degrees(start)} '
-                'from the goal; no collision-free path joins them')
-        nodes, _, target = found
-        goal = goals[which_goal[target]]
-        middle = grid.configurations[nodes]
-        path = self._shortcut(np.vstack([middle, goal] if escape is not None
-                                        else [start, middle, goal]))
-        if path is None:
-            return Plan.failure('no connection: the grid path failed its final collision '
-                                'check; try a finer grid_resolution_rad')
-        return Plan.through(path if escape is None else np.vstack([start, path]))
+            blocked = Plan.failure('no connection found: too many grid edges turned out '
+                                   'blocked by thin forbidden regions; try a finer '
+                                   'grid_resolution_rad')
+            return [plan or blocked for plan in plans]
+        for g, result in zip(open_groups, found):
+            if result is None:
+                plans[g] = separated
+                continue
+            nodes, _, target = result
+            goal = goals[np.repeat(groups[g], [len(links[k][0]) for k in groups[g]])[target]]
+            middle = grid.configurations[nodes]
+            path = self._shortcut(np.vstack([middle, goal] if escape is not None
+                                            else [start, middle, goal]))
+            plans[g] = Plan.failure('no connection: the grid path failed its final collision '
+                                    'check; try a finer grid_resolution_rad') if path is None \
+                else Plan.through(path if escape is None else np.vstack([start, path]))
+        return plans
 
     def _way_out(self, start: np.ndarray, labels: set[int]) -> int | None:
         """The free node nearest ``start`` in joint travel among those that reach a goal."""
