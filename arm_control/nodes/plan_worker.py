@@ -8,6 +8,10 @@ its stdin and stdout: it imports only the timing code (multiprocessing's spawn w
 the node's whole module again, rclpy and all, and a fork would copy the DDS threads' locks).
 It runs at normal priority, and dies with the node: its stdin closes when the node's
 process goes.
+
+A plan from rest is answered twice: first a quick trajectory the arm starts on at once, then
+its refinement (``PlanTimer.refine``) from a hand-over time a safe margin past when the
+refinement is expected to be ready -- unless a newer request is already waiting.
 """
 
 from multiprocessing.connection import Connection
@@ -15,16 +19,43 @@ import os
 import subprocess
 import sys
 import threading
+import time
 
 from arm_control.config import ArmConfig
 from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
 from arm_control.control.trajectory.moving_start import toppra_solver
 
 
+# The refinement's hand-over comes this many times its expected time after the quick
+# trajectory starts, and never sooner than this; its time is expected from the quick
+# timing's, at the largest ratio seen lately (``HandoverClock``).
+HANDOVER_SAFETY = 2.0
+MIN_HANDOVER_S = 0.04
+FIRST_RATIO = 8.0
+RATIO_MEMORY = 0.9
+
+
+class HandoverClock:
+    """When a refinement can surely be ready: its time is expected as a multiple of the
+    quick timing's (both grow with the path and with the machine's load), the multiple the
+    largest seen lately."""
+
+    def __init__(self):
+        self.ratio = FIRST_RATIO
+
+    def handover_s(self, quick_s: float) -> float:
+        return max(MIN_HANDOVER_S, HANDOVER_SAFETY * self.ratio * quick_s)
+
+    def seen(self, quick_s: float, refine_s: float) -> None:
+        self.ratio = max(RATIO_MEMORY * self.ratio, refine_s / max(quick_s, 1e-4))
+
+
 def _serve(requests: Connection, results: Connection) -> None:
     """The worker: (arm, config) first, then time each (request, plan) that comes in and
-    send back the TimedPlan; new (arm, config) when the settings change at run time."""
+    send back the TimedPlan (from rest: the quick one, then its refinement); new (arm,
+    config) when the settings change at run time."""
     timer = None
+    clock = HandoverClock()
     while True:
         try:
             item = requests.recv()
@@ -42,11 +73,24 @@ def _serve(requests: Connection, results: Connection) -> None:
                 threading.Thread(target=toppra_solver, daemon=True).start()
             continue
         request, plan = item
+        from_rest = request.start_time_s is None
+        began = time.perf_counter()
         try:
-            timed = timer.time_plan(request, plan)
+            timed = timer.time_plan(request, plan, quick=from_rest)
         except Exception as error:              # never leave a goal hanging
             timed = TimedPlan(request, None, f'timing the plan failed: {error!r}')
         results.send(timed)
+        quick_s = time.perf_counter() - began
+        if not (from_rest and timed.ok) or requests.poll():
+            continue                            # nothing to refine, or a newer request
+        began = time.perf_counter()
+        try:
+            refined = timer.refine(timed, clock.handover_s(quick_s))
+        except Exception:                       # the quick trajectory carries on
+            refined = None
+        clock.seen(quick_s, time.perf_counter() - began)
+        if refined is not None:
+            results.send(refined)
 
 
 class PlanWorker:

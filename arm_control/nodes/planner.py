@@ -151,7 +151,7 @@ class PlannerNode(Node):
             branches = self.ranking.validator.free_configurations(*goal_xy)
         except UnreachableError:
             branches = []                  # out of reach: the planner's answer says so
-        plans = [self.planner.plan_to_configuration(start_q, q) for q in branches]
+        plans = self.planner.plan_to_configurations(start_q, branches)
         fastest = self.ranking.fastest_branch([plan for plan in plans if plan.ok])
         return fastest if fastest is not None else self.planner.plan(start_q, goal_xy)
 

@@ -49,15 +49,16 @@ def _with_room(arm: ArmConfig) -> ForbiddenSpace:
     return ForbiddenSpace(dataclasses.replace(arm, world=world))
 
 
-def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: TrajectoryLimits):
-    """(amplitudes (H, 2) of the bend Σₕ aₕ·sin(hπσ/L) that make the path fastest, or
-    zeros; the (σ, sag) of the unbent path's bus, or None).
+def best_shape(base: BlendedPath, dynamics: ArmDynamics, forbidden, limits: TrajectoryLimits,
+               start_speed: float = 0.0):
+    """(amplitudes (H, 2) of the bend Σₕ aₕ·bₕ(σ/L) that make ``base`` fastest from
+    ``start_speed`` (a moving start's path is ``flat_start``), or zeros; the (σ, sag) of the
+    unbent path's bus, or None).
 
     A grid of the first harmonic's amplitudes, then ``_STEPS`` refinements over every
     combination of ±step; each batch timed at once.
     """
     zeros = np.zeros((_HARMONICS, 2))
-    base = BlendedPath(points, radii)
     length = base.length
     grid = clustered(length, SEARCH_STAGES)
     fraction = grid / length
@@ -66,7 +67,7 @@ def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: Trajecto
 
     def timed(terms, sag_v):
         A, B, C, D, W = rows(terms, limits, sag_v)
-        return fastest_speeds(A, B, C, D, W, speed_caps(limits, terms.dq), steps)
+        return fastest_speeds(A, B, C, D, W, speed_caps(limits, terms.dq), steps, start_speed)
 
     one = PathTerms(dynamics, q0[None], dq0[None], ddq0[None])
 
@@ -83,11 +84,12 @@ def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: Trajecto
         return zeros, bus                          # a hop: the search would cost more
     roomy = _with_room(forbidden.arm)
     base_roomy = np.asarray(roomy.is_free(q0), dtype=bool)
+    flat = base.flat_start
 
     def search(shapes):
-        q = q0 + shape_terms(fraction, shapes, 0)
-        dq = dq0 + shape_terms(fraction, shapes, 1) / length
-        ddq = ddq0 + shape_terms(fraction, shapes, 2) / length ** 2
+        q = q0 + shape_terms(fraction, shapes, 0, flat)
+        dq = dq0 + shape_terms(fraction, shapes, 1, flat) / length
+        ddq = ddq0 + shape_terms(fraction, shapes, 2, flat) / length ** 2
         # Free with room where the planner's path has room, free elsewhere (room ⇒ free).
         ok = np.asarray(roomy.is_free(q.reshape(-1, 2)), dtype=bool).reshape(q.shape[:2])
         tight = ~ok & ~base_roomy
@@ -121,13 +123,12 @@ def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: Trajecto
     return best, bus
 
 
-def free_shape(points, radii, shape, forbidden, step_rad):
+def free_shape(base: BlendedPath, shape, forbidden, step_rad):
     """``shape``, or the largest of its halves, quarters, ... whose path is free at
     ``step_rad`` (the search saw only coarse samples); None when none is."""
     for scale in (1.0, 0.5, 0.25):
         if not np.any(shape):
             break
-        path = BlendedPath(points, radii, shape=scale * shape)
-        if len(forbidden_at(path, forbidden, step_rad)) == 0:
+        if len(forbidden_at(base.with_shape(scale * shape), forbidden, step_rad)) == 0:
             return scale * shape
     return None
