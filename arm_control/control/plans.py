@@ -31,7 +31,7 @@ from arm_control.control.trajectory import (estimated_duration_s, refined_trajec
                                             time_optimal_trajectory, Trajectory,
                                             TrajectoryError, TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics
-from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
 
 # Branches whose quick estimate is within this fraction of the best one's are timed in full.
@@ -184,10 +184,7 @@ class PlanTimer:
         planner that cannot plan to a configuration chooses the branch itself."""
         started = time.perf_counter()
         if hasattr(planner, 'plan_to_configurations'):
-            plans = planner.plan_to_configurations(
-                request.start_q, self.ranking.validator.free_configurations(*request.goal.xy))
-            best = self.ranking.fastest_branch([p for p in plans if p.ok])
-            plan = best if best is not None else (plans[0] if plans else None)
+            plan = self.ranking.plan(planner, request.start_q, request.goal.xy)
         else:
             plan = planner.plan(request.start_q, request.goal.xy)
         return replace(self.time_plan(request, plan), compute_s=time.perf_counter() - started)
@@ -202,6 +199,18 @@ class BranchRanking:
         self.forbidden = self.validator.forbidden
         self.clear_space = ForbiddenSpace(arm, arm.world.clearance_rad)
         self.limits = TrajectoryLimits.from_arm(arm)
+
+    def plan(self, planner, start_q, goal_xy):
+        """What the planner node answers: of the goal's free elbow branches, the path
+        (``planner.plan_to_configurations``) that gets there soonest; with none free, or
+        none timed, the planner's own answer (its reason why not)."""
+        try:
+            branches = self.validator.free_configurations(*goal_xy)
+        except UnreachableError:
+            branches = []                  # out of reach: the planner's answer says so
+        plans = planner.plan_to_configurations(start_q, branches) if branches else []
+        fastest = self.fastest_branch([plan for plan in plans if plan.ok])
+        return fastest if fastest is not None else planner.plan(start_q, goal_xy)
 
     def duration_s(self, waypoints) -> float:
         """The path's duration from rest to rest, timed quickly (checked, not bent; inf

@@ -34,7 +34,6 @@ from arm_control.config import ArmConfig, FRAME_ID, PlannerConfig
 from arm_control.control.events import quote
 from arm_control.control.goals import PLANE_TOLERANCE_M
 from arm_control.control.plans import BranchRanking
-from arm_control.model.kinematics import UnreachableError
 from arm_control.nodes import messages
 from arm_control.nodes.common import declare_parameters, LATCHED, run, status
 from arm_control.planning.planner import Planner, poses_from_waypoints
@@ -146,14 +145,8 @@ class PlannerNode(Node):
 
     def plan(self, start_q, goal_xy):
         """The elbow branch that gets there soonest, as the controller would choose it
-        (``BranchRanking``); the planner's own choice for a goal without a clear branch."""
-        try:
-            branches = self.ranking.validator.free_configurations(*goal_xy)
-        except UnreachableError:
-            branches = []                  # out of reach: the planner's answer says so
-        plans = self.planner.plan_to_configurations(start_q, branches)
-        fastest = self.ranking.fastest_branch([plan for plan in plans if plan.ok])
-        return fastest if fastest is not None else self.planner.plan(start_q, goal_xy)
+        (``BranchRanking.plan``); the planner's own choice for a goal without a clear branch."""
+        return self.ranking.plan(self.planner, start_q, goal_xy)
 
     def check_frame(self, header, what: str) -> None:
         if header.frame_id not in ('', FRAME_ID):

@@ -18,7 +18,8 @@ import math
 import numpy as np
 
 from arm_control.control.trajectory.bus import (bus_profile, exact_timing,
-                                                FINE_BUS_ITERATIONS, under_the_bus)
+                                                FINE_BUS_ITERATIONS, QUICK_AFTER_FIT,
+                                                under_the_bus)
 from arm_control.control.trajectory.limits import TrajectoryError, TrajectoryLimits
 from arm_control.control.trajectory.moving_start import time_moving
 from arm_control.control.trajectory.rows import PathTerms
@@ -61,7 +62,7 @@ def time_from_rest(path, grid, terms: PathTerms, limits: TrajectoryLimits,
         return solve(0.0), None
     if coarse:
         start = None if bus_hint is None else np.interp(grid, *bus_hint)
-        x, sag = under_the_bus(solve, terms, limits, grid, start)
+        x, sag = under_the_bus(solve, terms, limits, grid, start, after_fit=QUICK_AFTER_FIT)
         return x, (grid, sag)
     sigma, sag = bus_profile(path, terms.dynamics, limits, margin_v, start_speed, bus_hint)
     x, fine = under_the_bus(solve, terms, limits, grid, np.interp(grid, sigma, sag),
