@@ -3,8 +3,10 @@
 A goal from rest goes the way it goes through ROS, each step called as the nodes call it:
 
 - planner: what the planner node does for plan_path (``BranchRanking.plan``): the path of
-  each free elbow branch from one grid search, the branch choice (quick estimates, and when
-  another branch comes within the margin, a quick timing of the close ones);
+  each free elbow branch from one grid search (none for a preset's branch: the node builds
+  their shortest-path trees at start-up, and so does this bench), the branch choice (quick
+  estimates, and when another branch comes within the margin, a quick timing of the close
+  ones);
 - quick: what the worker answers at once (``PlanTimer.time_plan(quick=True)``): the path
   checked and timed on a few dozen stages, not bent. The arm starts on it;
 - the user waits for planner + quick (the round trips through DDS and the pipe to the
@@ -103,6 +105,8 @@ def planning_times(files=(), repeats=PLANNING_REPEATS):
     arm, controller = config.load('controller', *files)
     planner = Planner(arm, config.load('planner', *files)[1])
     timer, clock = PlanTimer(arm, controller), HandoverClock()
+    for q in timer.ranking.preset_configurations():      # as the node does at start-up
+        planner.prepare(q)
     requests = [PlanRequest(i, Goal(goal[0], goal[1], name), tuple(q), (0.0, 0.0), None, 0.0)
                 for i, (name, q, goal) in enumerate(planning_moves(arm, files))]
     first = None

@@ -200,6 +200,11 @@ class BranchRanking:
         self.clear_space = ForbiddenSpace(arm, arm.world.clearance_rad)
         self.limits = TrajectoryLimits.from_arm(arm)
 
+    def preset_configurations(self) -> list:
+        """Every free elbow branch of every preset: the goals a robot keeps going to."""
+        return [q for _, x, y in self.validator.arm.presets
+                for q in self.validator.free_configurations(x, y)]
+
     def plan(self, planner, start_q, goal_xy):
         """What the planner node answers: of the goal's free elbow branches, the path
         (``planner.plan_to_configurations``) that gets there soonest; with none free, or

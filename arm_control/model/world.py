@@ -169,16 +169,23 @@ class ForbiddenSpace:
 
     def collides(self, q, links=(0, 1)) -> np.ndarray:
         """Whether a point of either link (of ``links``: 0 the upper arm, 1 the forearm) lies
-        in a forbidden rectangle (limits aside): every rectangle at once, along a last
-        axis."""
+        in a forbidden rectangle (limits aside): every link and rectangle whose bounding
+        boxes meet (which a hit needs) tested at once."""
         q = np.asarray(q, dtype=float)
         hit = np.zeros(q.shape[:-1], dtype=bool)
         if not self.rectangles:
             return hit
-        segments = self._links(q)
+        flat = hit.reshape(-1)
+        x_min, y_min, x_max, y_max = self._bounds
         for link in links:
-            hit |= np.any(segments_hit_rectangle(*(end[..., None] for end in segments[link]),
-                                                 self._bounds), axis=-1)
+            x0, y0, x1, y1 = (end.reshape(-1, 1) for end in self._links(q)[link])
+            near = ((np.minimum(x0, x1) <= x_max) & (np.maximum(x0, x1) >= x_min)
+                    & (np.minimum(y0, y1) <= y_max) & (np.maximum(y0, y1) >= y_min))
+            sample, region = np.nonzero(near)
+            if len(sample):
+                meets = segments_hit_rectangle(x0[sample, 0], y0[sample, 0], x1[sample, 0],
+                                               y1[sample, 0], self._bounds[:, region])
+                flat[sample[meets]] = True
         return hit
 
     def forearm_collides(self, q) -> np.ndarray:

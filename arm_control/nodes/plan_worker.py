@@ -28,11 +28,12 @@ from arm_control.control.trajectory.moving_start import toppra_solver
 
 # The refinement's hand-over comes this many times its expected time after the quick
 # trajectory starts, and never sooner than this; its time is expected from the quick
-# timing's, at the largest ratio seen lately (``HandoverClock``).
-HANDOVER_SAFETY = 2.0
-MIN_HANDOVER_S = 0.04
-FIRST_RATIO = 8.0
-RATIO_MEMORY = 0.9
+# timing's, at the largest ratio seen lately, an older one weighing this much less with
+# each goal (``HandoverClock``).
+HANDOVER_SAFETY = 1.5
+MIN_HANDOVER_S = 0.03
+FIRST_RATIO = 12.0
+RATIO_MEMORY = 0.7
 
 
 class HandoverClock:

@@ -19,6 +19,7 @@ from arm_control.config import ArmConfig, PlannerConfig
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.graph import ConfigurationGrid, segments_free
+from arm_control.planning.trees import GoalTrees
 
 # Lazily found blocked edges are cut and the search re-run at most this often per query.
 MAX_SEARCHES = 50
@@ -92,6 +93,7 @@ class Planner:
         self.forbidden = ForbiddenSpace(arm)
         self.grid = ConfigurationGrid(self.forbidden, config.grid_resolution_rad,
                                       arm.world.check_step_rad)
+        self.trees = GoalTrees(self.grid)
 
     # Public
 
@@ -149,6 +151,16 @@ class Planner:
         for k, plan in zip(where, self._search(start, goals, each=True) if goals else []):
             plans[k] = plan
         return plans
+
+    def prepare(self, goal_q) -> bool:
+        """Build the shortest-path tree toward the configuration ``goal_q`` (a preset's
+        branch: ``trees``), so that plans to it need no search; False when it is forbidden
+        or already prepared."""
+        goal, why = self._goal(np.asarray(goal_q, dtype=float).ravel())
+        if why is not None or goal in self.trees:
+            return False
+        self.trees.build(goal, self.grid.connections(goal, toward=True))
+        return True
 
     # Ends
 
@@ -241,6 +253,14 @@ class Planner:
         open_groups = [g for g in open_groups if plans[g] is None]
         if not open_groups:
             return plans
+        if each and escape is None:                 # a goal with a tree needs no search
+            for g in open_groups:
+                found = self.trees.path(goals[g], source_nodes, source_costs)
+                if found is not None:
+                    plans[g] = self._finish(start, goals[g], found[0], escape)
+            open_groups = [g for g in open_groups if plans[g] is None]
+            if not open_groups:
+                return plans
         targets = [(np.concatenate([links[k][0] for k in groups[g]]),
                     np.concatenate([links[k][1] for k in groups[g]])) for g in open_groups]
         # Most detours cost well under half as much again as the straight move.
@@ -260,13 +280,19 @@ class Planner:
                 continue
             nodes, _, target = result
             goal = goals[np.repeat(groups[g], [len(links[k][0]) for k in groups[g]])[target]]
-            middle = grid.configurations[nodes]
-            path = self._shortcut(np.vstack([middle, goal] if escape is not None
-                                            else [start, middle, goal]))
-            plans[g] = Plan.failure('no connection: the grid path failed its final collision '
-                                    'check; try a finer grid_resolution_rad') if path is None \
-                else Plan.through(path if escape is None else np.vstack([start, path]))
+            plans[g] = self._finish(start, goal, nodes, escape)
         return plans
+
+    def _finish(self, start, goal, nodes, escape) -> Plan:
+        """The plan along the grid path ``nodes``: from the start (or its way out) to the
+        goal, shortcut."""
+        middle = self.grid.configurations[nodes]
+        path = self._shortcut(np.vstack([middle, goal] if escape is not None
+                                        else [start, middle, goal]))
+        if path is None:
+            return Plan.failure('no connection: the grid path failed its final collision '
+                                'check; try a finer grid_resolution_rad')
+        return Plan.through(path if escape is None else np.vstack([start, path]))
 
     def _way_out(self, start: np.ndarray, labels: set[int]) -> int | None:
         """The free node nearest ``start`` in joint travel among those that reach a goal."""

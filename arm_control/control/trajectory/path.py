@@ -18,12 +18,13 @@ from arm_control.model.world import ForbiddenSpace
 # Corners that turn by more than this (a near reversal) always stop rather than blend.
 MAX_BLEND_TURN_RAD = math.radians(175.0)
 _MAX_BLEND_HALVINGS = 6
-# Timing grids: about one stage per this much path length (rad), within [least, most] stages;
-# TOPP-RA (moving starts) on the coarser one, the exact timing from rest on the finer.
-COARSE_GRID = (0.01, 40, 240)
-FINE_GRID = (0.0075, 60, 260)
+# Timing grids: about one stage per this much path length (rad), within [least, most] stages,
+# and each blend of radius r cut in stages of r/(this last number); a moving start on the
+# coarser one, the exact timing from rest on the finer.
+COARSE_GRID = (0.01, 40, 240, 16)
+FINE_GRID = (0.0075, 60, 260, 16)
 # ... and a quick timing (the arm starts on it while the fine one is found) on this one.
-QUICK_GRID = (0.05, 32, 48)
+QUICK_GRID = (0.05, 32, 48, 4)
 
 
 def _ramp(t, r, order):
@@ -290,9 +291,9 @@ def clustered(length: float, stages: int) -> np.ndarray:
 
 def grid_for(path: BlendedPath, stages=COARSE_GRID) -> np.ndarray:
     """Stages clustered toward both ends (``clustered``), finer inside the blends (where q''
-    changes fast); ``stages``: (step, least, most), e.g. ``FINE_GRID``."""
+    changes fast); ``stages``: (step, least, most, per radius), e.g. ``FINE_GRID``."""
     length = path.length
-    step, least, most = stages
+    step, least, most, per_radius = stages
     stages = int(min(most, max(least, math.ceil(length / step))))
     grid = [clustered(length, stages)]
     step = length / stages
@@ -300,7 +301,7 @@ def grid_for(path: BlendedPath, stages=COARSE_GRID) -> np.ndarray:
     if path.start_radius > 0.0:
         bends.append((0.0, path.start_radius))
     for centre, r in bends:
-        spacing = min(step, r / 16)
+        spacing = min(step, r / per_radius)
         if spacing < step:
             grid.append(np.arange(max(centre - r, 0.0), min(centre + r, length), spacing))
     grid = np.unique(np.concatenate(grid))

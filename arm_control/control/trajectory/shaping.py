@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from arm_control.config import ArmConfig
-from arm_control.control.trajectory.bus import under_the_bus
+from arm_control.control.trajectory.bus import exact_timing, under_the_bus
 from arm_control.control.trajectory.exact import durations, fastest_speeds
 from arm_control.control.trajectory.limits import TrajectoryLimits
 from arm_control.control.trajectory.path import (BlendedPath, clustered, forbidden_at,
@@ -69,13 +69,9 @@ def best_shape(base: BlendedPath, dynamics: ArmDynamics, forbidden, limits: Traj
         A, B, C, D, W = rows(terms, limits, sag_v)
         return fastest_speeds(A, B, C, D, W, speed_caps(limits, terms.dq), steps, start_speed)
 
-    one = PathTerms(dynamics, q0[None], dq0[None], ddq0[None])
-
-    def unshaped(sag_v):
-        speed = timed(one, sag_v)[0]
-        return speed ** 2 if np.all(np.isfinite(speed)) else None
-
-    x, sag = under_the_bus(unshaped, PathTerms(dynamics, q0, dq0, ddq0), limits, grid)
+    terms = PathTerms(dynamics, q0, dq0, ddq0)
+    x, sag = under_the_bus(exact_timing(terms, grid, limits, 0.0, start_speed), terms, limits,
+                           grid)
     if x is None:
         return zeros, None
     bus = None if limits.supply is None else (grid, sag)
