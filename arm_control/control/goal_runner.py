@@ -118,7 +118,9 @@ class GoalRunner:
 
     def ask(self, now_s: float, goal: Goal, rest_q, lead_s: float = PREEMPT_LEAD_S) -> None:
         """A plan from where the setpoint will be ``lead_s`` ahead if it is still moving then
-        (the new motion takes over there), else from where it comes to rest."""
+        (the new motion takes over there), else from where it comes to rest. The motion the
+        new one starts from is no longer refined: the new plan starts where it will be."""
+        self.refinable = None
         start_time = now_s + lead_s
         timeline = self.setpoints.timeline
         if timeline.moving_at(start_time):
@@ -182,6 +184,7 @@ class GoalRunner:
 
     def fail(self, now_s: float, reason: str) -> None:
         self.plans.drop()
+        self.refinable = None
         self.counts['failed'] += 1
         goal = self.queue.finish()
         self.setpoints.brake(now_s)
@@ -243,10 +246,12 @@ class GoalRunner:
     def interrupt(self) -> None:
         """The arm stopped under the goal (sensors lost, moved): it goes first again."""
         self.plans.drop()
+        self.refinable = None
         self.queue.put_back()
         self.goal_q = None
 
     def drop(self) -> int:
         """Forget every goal; returns how many there were."""
         self.plans.drop()
+        self.refinable = None
         return self.queue.clear()

@@ -11,7 +11,9 @@ process goes.
 
 A plan from rest is answered twice: first a quick trajectory the arm starts on at once, then
 its refinement (``PlanTimer.refine``) from a hand-over time a safe margin past when the
-refinement is expected to be ready -- unless a newer request is already waiting.
+refinement is expected to be ready -- unless a newer request is already waiting. Once
+ready, the worker answers a move between two presets for itself, so the first goal finds its
+caches warm.
 """
 
 from multiprocessing.connection import Connection
@@ -21,7 +23,10 @@ import sys
 import threading
 import time
 
+import numpy as np
+
 from arm_control.config import ArmConfig
+from arm_control.control.goals import Goal
 from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
 from arm_control.control.trajectory.moving_start import toppra_solver
 
@@ -72,26 +77,49 @@ def _serve(requests: Connection, results: Connection) -> None:
                 # The moving-start solver's import (0.8 s) done meanwhile, not at the first
                 # goal that preempts another.
                 threading.Thread(target=toppra_solver, daemon=True).start()
+                _warm_up(timer, clock)
             continue
-        request, plan = item
-        from_rest = request.start_time_s is None
-        began = time.perf_counter()
-        try:
-            timed = timer.time_plan(request, plan, quick=from_rest)
-        except Exception as error:              # never leave a goal hanging
-            timed = TimedPlan(request, None, f'timing the plan failed: {error!r}')
-        results.send(timed)
-        quick_s = time.perf_counter() - began
-        if not (from_rest and timed.ok) or requests.poll():
-            continue                            # nothing to refine, or a newer request
-        began = time.perf_counter()
-        try:
-            refined = timer.refine(timed, clock.handover_s(quick_s))
-        except Exception:                       # the quick trajectory carries on
-            refined = None
-        clock.seen(quick_s, time.perf_counter() - began)
-        if refined is not None:
-            results.send(refined)
+        _answer(timer, clock, *item, results.send, requests.poll)
+
+
+def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, send,
+            newer) -> None:
+    """Time ``plan`` for ``request`` and ``send`` the answer; from rest, the quick one, then
+    (unless ``newer()``: another request waits) its refinement."""
+    from_rest = request.start_time_s is None
+    began = time.perf_counter()
+    try:
+        timed = timer.time_plan(request, plan, quick=from_rest)
+    except Exception as error:              # never leave a goal hanging
+        timed = TimedPlan(request, None, f'timing the plan failed: {error!r}')
+    send(timed)
+    quick_s = time.perf_counter() - began
+    if not (from_rest and timed.ok) or newer():
+        return
+    began = time.perf_counter()
+    try:
+        refined = timer.refine(timed, clock.handover_s(quick_s))
+    except Exception:                       # the quick trajectory carries on
+        refined = None
+    clock.seen(quick_s, time.perf_counter() - began)
+    if refined is not None:
+        send(refined)
+
+
+def _warm_up(timer: PlanTimer, clock: HandoverClock) -> None:
+    """Answer a move between the first two presets and throw the answers away: the first
+    goal then finds the caches warm (the forbidden-space cells the checks prove, numpy's
+    first calls) and the hand-over clock set."""
+    presets = timer.arm.presets
+    if len(presets) < 2:
+        return
+    (_, x0, y0), (_, x1, y1) = presets[:2]
+    starts = timer.ranking.validator.free_configurations(x0, y0)
+    goals = timer.ranking.validator.free_configurations(x1, y1)
+    if starts and goals:
+        request = PlanRequest(0, Goal(x1, y1, 'warm-up'), starts[0], (0.0, 0.0), None, 0.0)
+        _answer(timer, clock, request, PathPlan(np.array([starts[0], goals[0]])),
+                lambda timed: None, lambda: False)
 
 
 class PlanWorker:
