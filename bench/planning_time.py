@@ -89,7 +89,7 @@ def one_goal(planner, timer, clock, request):
     plan, plan_cpu, plan_wall = _timed(
         lambda: timer.ranking.plan(planner, request.start_q, request.goal.xy))
     quick, quick_cpu, quick_wall = _timed(lambda: timer.time_plan(request, plan, quick=True))
-    handover = clock.handover_s(quick_wall)
+    handover = clock.handover_s(quick_wall, quick.trajectory.duration_s if quick.ok else 0.0)
     refined, refine_cpu, refine_wall = _timed(lambda: timer.refine(quick, handover))
     clock.seen(quick_wall, refine_wall)
     quick_s = quick.trajectory.duration_s if quick.ok else math.nan

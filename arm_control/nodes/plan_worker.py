@@ -37,6 +37,8 @@ from arm_control.control.trajectory.moving_start import toppra_solver
 # each goal (``HandoverClock``).
 HANDOVER_SAFETY = 1.5
 MIN_HANDOVER_S = 0.03
+# ... and never later than this share of the quick trajectory (a later one gains little).
+HANDOVER_SHARE = 0.4
 FIRST_RATIO = 12.0
 RATIO_MEMORY = 0.7
 
@@ -49,8 +51,11 @@ class HandoverClock:
     def __init__(self):
         self.ratio = FIRST_RATIO
 
-    def handover_s(self, quick_s: float) -> float:
-        return max(MIN_HANDOVER_S, HANDOVER_SAFETY * self.ratio * quick_s)
+    def handover_s(self, quick_s: float, duration_s: float) -> float:
+        """The hand-over for a quick timing that took ``quick_s`` (wall) and lasts
+        ``duration_s``."""
+        return min(max(MIN_HANDOVER_S, HANDOVER_SAFETY * self.ratio * quick_s),
+                   HANDOVER_SHARE * duration_s)
 
     def seen(self, quick_s: float, refine_s: float) -> None:
         self.ratio = max(RATIO_MEMORY * self.ratio, refine_s / max(quick_s, 1e-4))
@@ -98,7 +103,7 @@ def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, 
         return
     began = time.perf_counter()
     try:
-        refined = timer.refine(timed, clock.handover_s(quick_s))
+        refined = timer.refine(timed, clock.handover_s(quick_s, timed.trajectory.duration_s))
     except Exception:                       # the quick trajectory carries on
         refined = None
     clock.seen(quick_s, time.perf_counter() - began)
