@@ -25,6 +25,8 @@ from arm_control.planning.trees import GoalTrees
 MAX_SEARCHES = 50
 # A segment is first sampled this many times more coarsely: most blocked ones fail there.
 COARSE_FACTOR = 10
+# ... and a shortcut candidate before that, this many times.
+SIGHT_FACTOR = 30
 # Shortcut candidates that pass the coarse check are checked finely, farthest first, this
 # many, each first at a step this many times coarser (a grazing segment fails there).
 MAX_FINE_CHECKS = 6
@@ -325,8 +327,10 @@ class Planner:
             ahead = corners[corners > anchor + 1]
             if len(ahead) > MAX_CANDIDATES:               # evenly spread, the last included
                 ahead = ahead[np.linspace(0, len(ahead) - 1, MAX_CANDIDATES).round().astype(int)]
-            in_sight = ahead[segments_free(self.forbidden, np.broadcast_to(path[anchor], (
-                len(ahead), 2)), path[ahead], COARSE_FACTOR * step)]
+            for factor in (SIGHT_FACTOR, COARSE_FACTOR):     # coarsest first: cheap misses
+                ahead = ahead[segments_free(self.forbidden, np.broadcast_to(
+                    path[anchor], (len(ahead), 2)), path[ahead], factor * step)]
+            in_sight = ahead
             chosen = anchor + 1
             for corner in in_sight[::-1][:MAX_FINE_CHECKS]:
                 if self.segment_is_free(path[anchor], path[corner], MIDDLE_FACTOR):
