@@ -7,7 +7,8 @@ while its control loop keeps the beat, and tests and benchmarks call it directly
 
 The elbow branch is chosen by time, the same way in-process and through the planner node
 (``fastest_branch``): each free branch's path is estimated quickly; when others come within
-``BRANCH_SCREEN_MARGIN`` of the best, those are timed (quickly) and the fastest wins. Ranking
+``BRANCH_SCREEN_MARGIN`` of the best, those are estimated again with their best bend (the
+first grid of the shape search) and the fastest wins. Ranking
 uses the arm's own limits (the battery, the current limits), not the controller's reserves,
 so the planner node, which knows only the arm, ranks exactly as the controller would.
 
@@ -27,9 +28,9 @@ import numpy as np
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.goals import Goal, GoalValidator
 from arm_control.control.motions import ChainedTrajectory
-from arm_control.control.trajectory import (estimated_duration_s, refined_trajectory,
-                                            time_optimal_trajectory, Trajectory,
-                                            TrajectoryError, TrajectoryLimits)
+from arm_control.control.trajectory import (estimated_bent_duration_s, estimated_duration_s,
+                                            refined_trajectory, time_optimal_trajectory,
+                                            Trajectory, TrajectoryError, TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
@@ -218,19 +219,15 @@ class BranchRanking:
         return fastest if fastest is not None else planner.plan(start_q, goal_xy)
 
     def duration_s(self, waypoints) -> float:
-        """The path's duration from rest to rest, timed quickly (checked, not bent; inf
-        when it cannot be)."""
+        """The path's duration from rest to rest, estimated with the first grid of bends
+        (``estimated_bent_duration_s``: the bend often decides which branch is faster)."""
         space = self.clear_space if self.clear_space.path_is_free(waypoints) else self.forbidden
-        try:
-            return time_optimal_trajectory(waypoints, self.dynamics, space, self.limits,
-                                           quick=True).duration_s
-        except TrajectoryError:
-            return math.inf
+        return estimated_bent_duration_s(waypoints, self.dynamics, space, self.limits)
 
     def fastest_branch(self, plans):
         """Of ``plans`` (each with ``waypoints_rad``), the one that gets there soonest: all
-        estimated quickly; when others come within the margin of the best, those are timed
-        and the fastest of them wins."""
+        estimated quickly; when others come within the margin of the best, those are
+        estimated with their bend and the fastest of them wins."""
         if len(plans) <= 1:
             return plans[0] if plans else None
         estimates = [estimated_duration_s(p.waypoints_rad, self.dynamics, self.limits)

@@ -39,7 +39,8 @@ from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.electrical import PowerSupply
 from arm_control.model.world import ForbiddenSpace
 
-__all__ = ['BlendedPath', 'estimated_duration_s', 'PeriodFeedforward',
+__all__ = ['BlendedPath', 'estimated_bent_duration_s', 'estimated_duration_s',
+           'PeriodFeedforward',
            'refined_trajectory', 'sure_acceleration_rad_s2', 'time_optimal_trajectory',
            'Trajectory', 'TrajectoryError', 'TrajectoryLimits']
 
@@ -148,6 +149,22 @@ def estimated_duration_s(waypoints_rad, dynamics: ArmDynamics, limits: Trajector
     A, B, C, D, W = rows(terms, limits)
     speeds = fastest_speeds(A, B, C, D, W, speed_caps(limits, terms.dq), steps)
     return float(durations(steps, speeds)[0])
+
+
+def estimated_bent_duration_s(waypoints_rad, dynamics: ArmDynamics, forbidden: ForbiddenSpace,
+                              limits: TrajectoryLimits) -> float:
+    """A closer estimate (a few milliseconds) of the path's duration from rest to rest: its
+    corners rounded (not checked), the first grid of bends tried, timed on a coarse grid
+    under the unbent path's bus. For ranking paths whose quick estimates come close; inf when
+    the arm cannot follow the path."""
+    try:
+        points = clean_waypoints(waypoints_rad)
+    except TrajectoryError:
+        return math.inf
+    if len(points) < 2:
+        return 0.0
+    return best_shape(BlendedPath(points, initial_radii(points)), dynamics, forbidden, limits,
+                      steps=())[2]
 
 
 def sure_acceleration_rad_s2(dynamics: ArmDynamics, forbidden, voltage: float,
@@ -265,7 +282,7 @@ def _follow(points, velocity, dynamics, forbidden, limits, step_rad, reshape=Fal
         # Along one piece: bend the whole path where that is faster (leaving a moving
         # start's direction alone).
         base = BlendedPath(points, radii, start_direction, start_radius, flat_start=speed > 0)
-        shape, bus = best_shape(base, dynamics, forbidden, limits, speed)
+        shape, bus, _ = best_shape(base, dynamics, forbidden, limits, speed)
         shape = free_shape(base, shape, forbidden, step_rad)
         return [_timed_piece(points, radii, dynamics, limits, speed, start_direction,
                              start_radius, shape=shape, bus_hint=bus)]

@@ -50,12 +50,12 @@ def _with_room(arm: ArmConfig) -> ForbiddenSpace:
 
 
 def best_shape(base: BlendedPath, dynamics: ArmDynamics, forbidden, limits: TrajectoryLimits,
-               start_speed: float = 0.0):
+               start_speed: float = 0.0, steps=_STEPS):
     """(amplitudes (H, 2) of the bend Σₕ aₕ·bₕ(σ/L) that make ``base`` fastest from
     ``start_speed`` (a moving start's path is ``flat_start``), or zeros; the (σ, sag) of the
-    unbent path's bus, or None).
+    unbent path's bus, or None; the duration the search found, inf when it found none).
 
-    A grid of the first harmonic's amplitudes, then ``_STEPS`` refinements over every
+    A grid of the first harmonic's amplitudes, then ``steps`` refinements over every
     combination of ±step; each batch timed at once.
     """
     zeros = np.zeros((_HARMONICS, 2))
@@ -73,11 +73,11 @@ def best_shape(base: BlendedPath, dynamics: ArmDynamics, forbidden, limits: Traj
     x, sag = under_the_bus(exact_timing(terms, grid, limits, 0.0, start_speed), terms, limits,
                            grid)
     if x is None:
-        return zeros, None
+        return zeros, None, math.inf
     bus = None if limits.supply is None else (grid, sag)
     unshaped_s = float(durations(steps, np.sqrt(x)[None])[0])
     if not unshaped_s >= _MIN_DURATION_S:
-        return zeros, bus                          # a hop: the search would cost more
+        return zeros, bus, unshaped_s              # a hop: the search would cost more
     roomy = _with_room(forbidden.arm)
     base_roomy = np.asarray(roomy.is_free(q0), dtype=bool)
     flat = base.flat_start
@@ -108,15 +108,15 @@ def best_shape(base: BlendedPath, dynamics: ArmDynamics, forbidden, limits: Traj
     every = np.array(list(itertools.product((-1.0, 0.0, 1.0), repeat=2 * _HARMONICS)))
     every = every.reshape(-1, _HARMONICS, 2)
     axes = every[np.sum(np.abs(every), axis=(1, 2)) <= 1.0]
-    for index, step in enumerate(_STEPS):
+    for index, step in enumerate(steps):
         offsets = every if index < _FULL_STEPS else axes
         batch = best + offsets * step * length
         times = search(batch)
         if np.min(times) < best_s:
             best, best_s = batch[int(np.argmin(times))], float(np.min(times))
     if not math.isfinite(best_s) or best_s >= unshaped_s * (1.0 - _MIN_GAIN):
-        return zeros, bus
-    return best, bus
+        return zeros, bus, unshaped_s
+    return best, bus, best_s
 
 
 def free_shape(base: BlendedPath, shape, forbidden, step_rad):
