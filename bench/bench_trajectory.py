@@ -30,14 +30,10 @@ time (which also counts whatever else shares the machine's two cores).
 ``--what-if``: the current limits at 40, 60, 80 and 120 A per motor (and none): per move,
 the timed trajectory's duration against the electrical minimum at that limit.
 
-``--planning``: what a goal costs the controller (``PlanTimer.plan_and_time``): the path
-of each free elbow branch (planner), the branch choice (the quick estimates), the timing of
-the branches kept, and the total, median and p95 over repeats, CPU and wall, on the default
-arm (this suite) and on the FRC robot (its 30 preset-to-preset moves). To measure it on a
-busy machine, two busy loops beside it:
-
-    for i in 1 2; do timeout 120 python3 -c 'while True: pass' & done; \
-        python bench/bench_trajectory.py --planning; kill %1 %2
+``--planning``: what a goal costs before the arm moves, as the nodes run it (``planning_time``):
+the planner node's work (paths, branch choice) and the worker's quick timing, per move of this
+suite and of the FRC robot's preset moves, and the refinement that takes over while the arm
+moves. Loaded, with two busy loops beside it: ``python bench/planning_time.py --loaded``.
 
 Columns are plain functions of a ``Move`` returning {column name: text}; add one to
 ``COLUMNS`` (a closed-loop column goes next to the others).

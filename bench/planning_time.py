@@ -1,55 +1,71 @@
-"""What a goal costs the controller: path, branch choice and timing, per move.
+"""What a goal costs before the arm moves: the planner node's work and the worker's, per goal.
 
-``PlanTimer.plan_and_time`` (planned in-process): the path of each free elbow branch
-(planner), the branch choice (the quick estimates), the timing of the branches kept, and the
-total, median and p95 over repeats, CPU and wall, on the default arm
-(``bench_trajectory.SUITE``) and on the FRC robot (its 30 preset-to-preset moves). A fresh
-controller's first goal also pays for its caches (the forbidden-space cells it proves); it is
+A goal from rest goes the way it goes through ROS, each step called as the nodes call it:
+
+- planner: what the planner node does for plan_path (``BranchRanking.plan``): the path of
+  each free elbow branch from one grid search (none for a preset's branch: the node builds
+  their shortest-path trees at start-up, and so does this bench), the branch choice (quick
+  estimates, and when another branch comes within the margin, a quick timing of the close
+  ones);
+- quick: what the worker answers at once (``PlanTimer.time_plan(quick=True)``): the path
+  checked and timed on a few dozen stages, not bent. The arm starts on it;
+- the user waits for planner + quick (the round trips through DDS and the pipe to the
+  worker come on top: about a millisecond each);
+- refine: what the worker does next while the arm moves (``PlanTimer.refine``): the rest
+  of the path bent and timed finely from the hand-over time (``HandoverClock``, from the
+  quick timing's wall time), which takes over there if it is ready by then.
+
+Per move on the default arm (``bench_trajectory.SUITE``) and on the FRC robot (its 30
+preset-to-preset moves), repeated: CPU medians of each step, the user's wait (CPU and wall,
+median and p95), the refinement's wall time against its hand-over, and the durations: the
+quick trajectory, quick-then-refined (what the arm does), and the fine one from rest
+(``time_plan``, what a goal took before, after waiting for it). The first goal of a fresh
+planner and worker also pays for their caches (the forbidden-space cells they prove); it is
 reported apart.
 
-    python bench/bench_trajectory.py --planning [repeats]
-    # on a busy machine, two busy loops beside it:
-    for i in 1 2; do timeout 120 python3 -c 'while True: pass' & done; \
-        python bench/bench_trajectory.py --planning; kill %1 %2
+    python bench/planning_time.py [repeats]            # idle
+    python bench/planning_time.py --loaded [repeats]   # two busy loops beside it (busy.py)
 """
 
 import itertools
 import math
+from pathlib import Path
+import sys
 import time
 
-from bench_trajectory import _start_configuration, BENCH, Move, print_table, SUITE
-import numpy as np
+BENCH = Path(__file__).resolve().parent
+sys.path[:0] = [str(BENCH), str(BENCH.parent)]
 
-from arm_control import config
-from arm_control.model.world import ForbiddenSpace
+import busy  # noqa: E402
+import numpy as np  # noqa: E402
 
-PLANNING_REPEATS = 15
+from arm_control import config  # noqa: E402
+from arm_control.control.goals import Goal  # noqa: E402
+from arm_control.control.plans import PlanRequest, PlanTimer  # noqa: E402
+from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
+from arm_control.model.world import ForbiddenSpace  # noqa: E402
+from arm_control.nodes.plan_worker import HandoverClock  # noqa: E402
+from arm_control.planning.planner import Planner  # noqa: E402
+
+PLANNING_REPEATS = 10
 FRC_ROBOT = BENCH.parent / 'config' / 'frc_robot.yaml'
 
 
-class _TimedPlanner:
-    """The planner, with the CPU time of its calls added up."""
-
-    def __init__(self, planner):
-        self.planner, self.cpu_s = planner, 0.0
-
-    def plan(self, start_q, goal_xy):
-        return self._timed(self.planner.plan, start_q, goal_xy)
-
-    def plan_to_configuration(self, start_q, goal_q):
-        return self._timed(self.planner.plan_to_configuration, start_q, goal_q)
-
-    def _timed(self, call, *args):
-        began = time.thread_time()
-        try:
-            return call(*args)
-        finally:
-            self.cpu_s += time.thread_time() - began
+def _start_configuration(arm, forbidden, start_xy):
+    """The start point's elbow-negative branch when it is free, else the other."""
+    kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+    positive, negative = kinematics.inverse(*start_xy)
+    for q in (negative, positive):
+        q = np.array([forbidden.to_joint_range(q[k], k) or q[k] for k in range(2)])
+        if forbidden.is_free(q):
+            return q
+    raise ValueError(f'the start {start_xy} is forbidden on both branches')
 
 
 def planning_moves(arm, files):
-    """(name, start q, goal xy): this suite on the default arm, else every preset to every
-    other preset."""
+    """(name, start q, goal xy): the trajectory bench's suite on the default arm, else every
+    preset to every other preset."""
+    from bench_trajectory import SUITE
     forbidden = ForbiddenSpace(arm)
     if files:
         presets = {name: (x, y) for name, x, y in arm.presets}
@@ -58,69 +74,103 @@ def planning_moves(arm, files):
     else:
         pairs = SUITE
     for name, start_xy, goal_xy in pairs:
-        move = Move(name, start_xy, goal_xy, arm, None, None, forbidden, None)
-        yield name, _start_configuration(move), goal_xy
+        yield name, _start_configuration(arm, forbidden, start_xy), goal_xy
+
+
+def _timed(call):
+    """(result, CPU s, wall s)."""
+    cpu, wall = time.thread_time(), time.perf_counter()
+    result = call()
+    return result, time.thread_time() - cpu, time.perf_counter() - wall
+
+
+def one_goal(planner, timer, clock, request):
+    """The steps of one goal, as the nodes run them: {step: (CPU s, wall s)} and durations."""
+    plan, plan_cpu, plan_wall = _timed(
+        lambda: timer.ranking.plan(planner, request.start_q, request.goal.xy))
+    quick, quick_cpu, quick_wall = _timed(lambda: timer.time_plan(request, plan, quick=True))
+    handover = clock.handover_s(quick_wall, quick.trajectory.duration_s if quick.ok else 0.0)
+    refined, refine_cpu, refine_wall = _timed(lambda: timer.refine(quick, handover))
+    clock.seen(quick_wall, refine_wall)
+    quick_s = quick.trajectory.duration_s if quick.ok else math.nan
+    in_time = refined is not None and refine_wall < handover
+    return {'planner': (plan_cpu, plan_wall), 'quick': (quick_cpu, quick_wall),
+            'refine': (refine_cpu, refine_wall), 'handover': handover, 'quick s': quick_s,
+            'moved s': handover + refined.trajectory.duration_s if in_time else quick_s,
+            'refined in time': in_time, 'plan': plan}
 
 
 def planning_times(files=(), repeats=PLANNING_REPEATS):
-    """Rows of path / branch choice / timing / total ms per move, and the pooled totals."""
-    from arm_control.control.controller import ArmController
-    from arm_control.control.goals import Goal
-    from arm_control.control.plans import PlanRequest
-    from arm_control.planning.planner import Planner
+    """Rows per move, the pooled user waits (CPU, wall; ms) and the first goal's wall ms."""
     arm, controller = config.load('controller', *files)
-    planner = _TimedPlanner(Planner(arm, config.load('planner', *files)[1]))
-    core = ArmController(arm, controller)
-    timing_cpu = [0.0]
-    timer = core.plan_timer
-    time_plan = timer.time_plan
-
-    def timed_time_plan(request, plan):
-        began = time.thread_time()
-        try:
-            return time_plan(request, plan)
-        finally:
-            timing_cpu[0] += time.thread_time() - began
-
-    timer.time_plan = timed_time_plan
+    planner = Planner(arm, config.load('planner', *files)[1])
+    timer, clock = PlanTimer(arm, controller), HandoverClock()
+    for q in timer.ranking.preset_configurations():      # as the node does at start-up
+        planner.prepare(q)
     requests = [PlanRequest(i, Goal(goal[0], goal[1], name), tuple(q), (0.0, 0.0), None, 0.0)
                 for i, (name, q, goal) in enumerate(planning_moves(arm, files))]
-    first = []
+    first = None
     samples = {r.goal.label: [] for r in requests}
     for repeat in range(repeats + 1):
         for request in requests:
-            planner.cpu_s, timing_cpu[0] = 0.0, 0.0
-            wall, cpu = time.perf_counter(), time.thread_time()
-            timed = timer.plan_and_time(request, planner)
-            cpu, wall = time.thread_time() - cpu, time.perf_counter() - wall
-            if repeat == 0:            # the first goal of a fresh controller pays its caches
-                first.append(1e3 * wall)
-                continue
-            samples[request.goal.label].append(
-                (planner.cpu_s, cpu - planner.cpu_s - timing_cpu[0], timing_cpu[0], cpu, wall,
-                 timed.trajectory.duration_s if timed.ok else math.nan))
+            steps = one_goal(planner, timer, clock, request)
+            if first is None:          # the first goal of a fresh planner and worker
+                first = 1e3 * (steps['planner'][1] + steps['quick'][1])
+            if repeat > 0:
+                samples[request.goal.label].append(steps)
     rows, pooled = [], []
-    for name, values in samples.items():
-        ms = np.array(values)[:, :5] * 1e3
-        pooled.append(ms[:, 3:5])
-        median, p95 = np.median(ms, axis=0), np.percentile(ms, 95, axis=0)
-        rows.append({'move': name, 'path ms': f'{median[0]:.1f}',
-                     'branch choice ms': f'{median[1]:.1f}', 'timing ms': f'{median[2]:.1f}',
-                     'total ms CPU median / p95': f'{median[3]:.1f} / {p95[3]:.1f}',
-                     'total ms wall median / p95': f'{median[4]:.1f} / {p95[4]:.1f}',
-                     'duration s': f'{np.median(np.array(values)[:, 5]):.3f}'})
-    pooled = np.vstack(pooled)
-    return rows, pooled, first
+    for request in requests:
+        runs = samples[request.goal.label]
+        ms = {k: 1e3 * np.array([run[k] for run in runs])
+              for k in ('planner', 'quick', 'refine')}
+        handover_ms = 1e3 * np.median([run['handover'] for run in runs])
+        wait = ms['planner'] + ms['quick']                   # (repeats, CPU / wall)
+        pooled.append(wait)
+        fine = timer.time_plan(request, runs[-1]['plan'])
+        rows.append({
+            'move': request.goal.label,
+            'planner ms': f'{np.median(ms["planner"][:, 0]):.1f}',
+            'quick ms': f'{np.median(ms["quick"][:, 0]):.1f}',
+            'wait ms CPU median / p95': f'{np.median(wait[:, 0]):.1f} / '
+                                        f'{np.percentile(wait[:, 0], 95):.1f}',
+            'wait ms wall median / p95': f'{np.median(wait[:, 1]):.1f} / '
+                                         f'{np.percentile(wait[:, 1], 95):.1f}',
+            'refine ms wall / hand-over ms': f'{np.median(ms["refine"][:, 1]):.0f} / '
+                                             f'{handover_ms:.0f}',
+            'refined in time': f'{sum(r["refined in time"] for r in runs)}/{len(runs)}',
+            'quick s': f'{runs[-1]["quick s"]:.3f}',
+            'moved s': f'{np.median([r["moved s"] for r in runs]):.3f}',
+            'fine from rest s': f'{fine.trajectory.duration_s:.3f}' if fine.ok else 'none'})
+    return rows, np.vstack(pooled), first
 
 
 def planning(repeats=PLANNING_REPEATS):
+    from bench_trajectory import print_table
     for label, files in (('default arm', ()), ('FRC robot', (str(FRC_ROBOT),))):
         rows, pooled, first = planning_times(files, repeats)
-        print(f'\nPlanning per goal on the {label} (PlanTimer.plan_and_time: path of each '
-              f'free branch + branch choice + timing), {repeats} repeats per move; path, '
-              'choice and timing: CPU medians')
+        print(f'\nPlanning per goal on the {label}, {repeats} repeats per move: the planner '
+              "node's work and the worker's quick timing (the user waits for both), CPU "
+              'medians; the refinement while the arm moves (wall, against its hand-over); '
+              'durations of the quick trajectory, of the move (quick, then refined when it '
+              'was in time) and of the fine timing from rest')
         print_table(rows)
-        print(f'all {len(pooled)} goals: CPU median {np.median(pooled[:, 0]):.1f} ms, p95 '
-              f'{np.percentile(pooled[:, 0], 95):.1f} ms; wall median '
+        print(f'all {len(pooled)} goals, the wait: CPU median {np.median(pooled[:, 0]):.1f} '
+              f'ms, p95 {np.percentile(pooled[:, 0], 95):.1f} ms; wall median '
               f'{np.median(pooled[:, 1]):.1f} ms, p95 {np.percentile(pooled[:, 1], 95):.1f} '
-              f'ms; the first goal of a fresh controller: {first[0]:.0f} ms wall')
+              f'ms; the first goal of a fresh planner and worker: {first:.0f} ms wall')
+
+
+def main():
+    numbers = [a for a in sys.argv[1:] if a.isdigit()]
+    repeats = int(numbers[0]) if numbers else PLANNING_REPEATS
+    loops = busy.start(2, 3600.0) if '--loaded' in sys.argv else []
+    try:
+        if loops:
+            print('two busy loops running beside it (bench/busy.py)')
+        planning(repeats)
+    finally:
+        busy.stop(loops)
+
+
+if __name__ == '__main__':
+    main()

@@ -319,8 +319,8 @@ def test_cancel_brakes_along_the_path_and_holds(arm, controller_config, planner)
     assert rig.lowest_m == 0.0
 
 
-@pytest.mark.parametrize('start_xy, goal_xy', [((0.178, 0.199), (1.215, 0.085)),
-                                               ((0.955, 0.157), (-0.351, 0.489)),
+@pytest.mark.parametrize('start_xy, goal_xy', [((0.676, 0.148), (0.013, 0.589)),
+                                               ((0.9, 0.228), (0.077, 0.464)),
                                                ((-0.4, 0.3), (0.25, 0.45))])
 def test_timed_moves_keep_the_clearance_from_forbidden_space(arm, controller_config, start_xy,
                                                              goal_xy):

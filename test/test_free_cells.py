@@ -32,3 +32,32 @@ def test_checks_through_the_cells_give_the_exact_answer(arm):
     q = rng.uniform(space.limits[:, 0], space.limits[:, 1], (5000, 2))
     np.testing.assert_array_equal(space.is_free(q),
                                   space.within_limits(q) & ~space.collides(q))
+
+
+@pytest.mark.parametrize('files', [(), (FRC_ROBOT,)])
+def test_a_configuration_in_a_cell_proved_clear_has_its_whole_margin_free(files):
+    """Cells proved with a margin: every configuration within the margin of one in such a
+    cell (on both joints) is free by the exact check."""
+    arm = config.load('sim', *files)[0]
+    space, margin = ForbiddenSpace(arm), arm.world.clearance_rad
+    rng = np.random.default_rng(13)
+    q = rng.uniform(space.limits[:, 0] - 0.05, space.limits[:, 1] + 0.05, (50_000, 2))
+    proved = free_cells(arm, margin).contain(q)
+    nearby = q[proved][:, None, :] + rng.uniform(-margin, margin, (np.count_nonzero(proved),
+                                                                   8, 2))
+    nearby = nearby.reshape(-1, 2)
+    assert np.all(space.within_limits(nearby) & ~space.collides(nearby))
+    assert np.count_nonzero(proved) > 0.5 * len(q)
+
+
+def test_clear_checks_through_the_cells_give_the_sampled_answer(arm):
+    """ForbiddenSpace with a margin answers as its nine-point check does, cells or not."""
+    space = ForbiddenSpace(arm, arm.world.clearance_rad)
+    rng = np.random.default_rng(14)
+    q = rng.uniform(space.limits[:, 0], space.limits[:, 1], (5000, 2))
+    square = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1],
+                       [0, 0]]) * space.margin_rad
+    plain = ForbiddenSpace(arm)
+    sampled = np.all(plain.within_limits(q[:, None] + square)
+                     & ~plain.collides(q[:, None] + square), axis=-1)
+    np.testing.assert_array_equal(space.is_free(q), sampled)

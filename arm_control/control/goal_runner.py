@@ -4,7 +4,9 @@ The runner shares the core's state machine, event log and setpoints (``controlle
 decides which goal comes next and what a planner's answer means, the core runs the loop.
 A goal waits in the queue; the next one starts when the arm is idle (after the dwell at the
 last one); starting it asks for a plan from where the setpoint will be (``PlanHandoff``);
-the plan's motion takes over on time, or the goal fails with the reason.
+the plan's motion takes over on time, or the goal fails with the reason. A plan taken at
+once from rest may be refined later (``PlanTimer.refine``): the refinement takes over from
+its motion at the hand-over time when it comes before then, else the motion carries on.
 """
 
 import math
@@ -22,6 +24,8 @@ from arm_control.control.state_machine import ArmState as S, StateMachine, Trigg
 # A preempting goal's new trajectory starts this far ahead on the current one: the time
 # the planner and the timing need, so the switch happens on time. Doubled on each retry.
 PREEMPT_LEAD_S = 0.1
+# A refinement takes over only when it comes at least this long before its hand-over time.
+HANDOVER_MARGIN_S = 0.002
 
 
 class GoalRunner:
@@ -35,6 +39,7 @@ class GoalRunner:
         self.queue = GoalQueue(config.goal_queue_size)
         self.plans = PlanHandoff(config.planner_timeout_s)
         self.goal_q: Optional[np.ndarray] = None     # where the current trajectory ends
+        self.refinable = None                 # (request id, motion) a refinement may take over
         self.arrived_s = -math.inf
         self.last_error = ''
         self.counts = dict.fromkeys(('queued', 'started', 'rejected', 'reached', 'failed'), 0)
@@ -113,7 +118,9 @@ class GoalRunner:
 
     def ask(self, now_s: float, goal: Goal, rest_q, lead_s: float = PREEMPT_LEAD_S) -> None:
         """A plan from where the setpoint will be ``lead_s`` ahead if it is still moving then
-        (the new motion takes over there), else from where it comes to rest."""
+        (the new motion takes over there), else from where it comes to rest. The motion the
+        new one starts from is no longer refined: the new plan starts where it will be."""
+        self.refinable = None
         start_time = now_s + lead_s
         timeline = self.setpoints.timeline
         if timeline.moving_at(start_time):
@@ -128,7 +135,11 @@ class GoalRunner:
         return self.plans.take()
 
     def on_timed_plan(self, now_s: float, timed: TimedPlan, rest_q) -> None:
-        """Take a timed plan; answers to older requests are ignored."""
+        """Take a timed plan; answers to older requests are ignored, and so are refinements
+        of a motion no longer in the plan or that come too late."""
+        if math.isfinite(timed.handover_s):
+            self._refine(now_s, timed)
+            return
         last = self.setpoints.timeline.last
         verdict, value = self.plans.answer(now_s, timed, -math.inf if last is None
                                            else last.end_s)
@@ -139,9 +150,28 @@ class GoalRunner:
         elif verdict == 'take':
             motion = Motion(timed.trajectory, value)
             self.setpoints.schedule(motion)
+            self.refinable = (timed.request.request_id, motion)
             self.goal_q = motion.final_q
             self.machine.fire(T.PLAN_READY)
             self.latency_s = self._latency(now_s, timed, value)
+
+    def _refine(self, now_s: float, timed: TimedPlan) -> None:
+        """The refinement takes over from its motion at the hand-over time, if that motion
+        is still the last planned (no brake, preemption or next goal since) and the time is
+        still ahead."""
+        request_id, motion = self.refinable or (None, None)
+        if (not timed.ok or timed.request.request_id != request_id or self.setpoints.driving
+                or self.setpoints.timeline.last is not motion):
+            return
+        begin_s = motion.begin_s + timed.handover_s
+        if now_s > begin_s - HANDOVER_MARGIN_S:
+            return                          # too late: the quick trajectory carries on
+        refined = Motion(timed.trajectory, begin_s)
+        self.setpoints.schedule(refined)
+        self.refinable = None
+        self.goal_q = refined.final_q
+        self.latency_s.update({'refinement': timed.compute_s,
+                               'trajectory': timed.handover_s + timed.trajectory.duration_s})
 
     def _latency(self, now_s: float, timed: TimedPlan, begin_s: float) -> dict[str, float]:
         """Where the time went between asking for the plan and the motion's start."""
@@ -154,6 +184,7 @@ class GoalRunner:
 
     def fail(self, now_s: float, reason: str) -> None:
         self.plans.drop()
+        self.refinable = None
         self.counts['failed'] += 1
         goal = self.queue.finish()
         self.setpoints.brake(now_s)
@@ -215,10 +246,12 @@ class GoalRunner:
     def interrupt(self) -> None:
         """The arm stopped under the goal (sensors lost, moved): it goes first again."""
         self.plans.drop()
+        self.refinable = None
         self.queue.put_back()
         self.goal_q = None
 
     def drop(self) -> int:
         """Forget every goal; returns how many there were."""
         self.plans.drop()
+        self.refinable = None
         return self.queue.clear()

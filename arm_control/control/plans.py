@@ -6,10 +6,16 @@ here, pure and free of the core's mutable state, so the node runs it in a worker
 while its control loop keeps the beat, and tests and benchmarks call it directly.
 
 The elbow branch is chosen by time, the same way in-process and through the planner node
-(``fastest_branch``): each free branch's path is estimated quickly; those within
-``BRANCH_SCREEN_MARGIN`` of the best are timed in full; the fastest wins. Ranking uses the
-arm's own limits (the battery, the current limits), not the controller's reserves, so the
-planner node, which knows only the arm, ranks exactly as the controller would.
+(``fastest_branch``): each free branch's path is estimated quickly; when others come within
+``BRANCH_SCREEN_MARGIN`` of the best, those are estimated again with their best bend (the
+first grid of the shape search) and the fastest wins. Ranking
+uses the arm's own limits (the battery, the current limits), not the controller's reserves,
+so the planner node, which knows only the arm, ranks exactly as the controller would.
+
+Through the worker a goal from rest is answered twice: at once with a quick trajectory the
+arm starts on (``time_quick``), then with the rest of it bent and timed finely from where
+the quick one will be a little later (``refine``), which takes over there when it arrives in
+time and ends sooner. The user waits only for the first.
 """
 
 from dataclasses import dataclass, replace
@@ -22,10 +28,11 @@ import numpy as np
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.goals import Goal, GoalValidator
 from arm_control.control.motions import ChainedTrajectory
-from arm_control.control.trajectory import (estimated_duration_s, time_optimal_trajectory,
-                                            TrajectoryError, TrajectoryLimits)
+from arm_control.control.trajectory import (estimated_bent_duration_s, estimated_duration_s,
+                                            refined_trajectory, time_optimal_trajectory,
+                                            Trajectory, TrajectoryError, TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics
-from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
 
 # Branches whose quick estimate is within this fraction of the best one's are timed in full.
@@ -69,7 +76,9 @@ class TimedPlan:
 
     ``compute_s``: the CPU time of the timing; ``answered_s``: when the planner answered
     (NaN: in-process, no round trip); ``received_s``: when the core got it (the node's
-    clock) -- where a goal's time goes, before the arm moves.
+    clock) -- where a goal's time goes, before the arm moves. ``handover_s`` (NaN: none):
+    this answer refines the motion taken for the same request, from this long after that
+    motion's start.
     """
 
     request: PlanRequest
@@ -78,6 +87,7 @@ class TimedPlan:
     compute_s: float = 0.0
     answered_s: float = math.nan
     received_s: float = math.nan
+    handover_s: float = math.nan
 
     @property
     def ok(self) -> bool:
@@ -105,18 +115,38 @@ class PlanTimer:
         self.limits = TrajectoryLimits.from_config(arm, config)
         self.ranking = BranchRanking(arm)
 
-    def time_plan(self, request: PlanRequest, plan) -> TimedPlan:
+    def time_plan(self, request: PlanRequest, plan, quick: bool = False) -> TimedPlan:
         """Check ``plan`` (anything with ``ok``, ``reason`` and ``waypoints_rad``) against the
-        request and time it."""
+        request and time it; ``quick``: from rest, on few stages and not bent (``refine``
+        makes it better from a little later)."""
         started = time.perf_counter()
         try:
-            trajectory, reason = self._time(request, plan)
+            trajectory, reason = self._time(request, plan, quick)
         except TrajectoryError as error:
             trajectory = None
             reason = f'no trajectory along the plan to {request.goal.label}: {error}'
         return TimedPlan(request, trajectory, reason, time.perf_counter() - started)
 
-    def _time(self, request: PlanRequest, plan):
+    def refine(self, quick: TimedPlan, handover_s: float) -> Optional[TimedPlan]:
+        """The answer that takes over from ``quick``'s trajectory ``handover_s`` after its
+        start: the rest bent and timed finely (``refined_trajectory``), or None when that
+        would not end sooner."""
+        started = time.perf_counter()
+        located = quick.trajectory.path_at(handover_s) \
+            if isinstance(quick.trajectory, Trajectory) else None
+        if located is None:
+            return None
+        # Bent only where it keeps the clearance, as the quick one was timed.
+        space = self.clear_space if self.clear_space.path_is_free(located[0].points) \
+            else self.forbidden
+        refined = refined_trajectory(quick.trajectory, handover_s, self.dynamics, space,
+                                     self.limits)
+        if refined is None:
+            return None
+        return TimedPlan(quick.request, refined, compute_s=time.perf_counter() - started,
+                         handover_s=handover_s)
+
+    def _time(self, request: PlanRequest, plan, quick: bool = False):
         label = request.goal.label
         if plan is None or not plan.ok:
             why = getattr(plan, 'reason', '') or 'the planner found no path'
@@ -143,7 +173,7 @@ class PlanTimer:
         velocity = request.start_velocity_rad_s
         if out is None:
             return time_optimal_trajectory(rest, self.dynamics, space, self.limits,
-                                           start_velocity_rad_s=velocity), ''
+                                           start_velocity_rad_s=velocity, quick=quick), ''
         first = time_optimal_trajectory(out, self.dynamics, Anywhere(), self.limits,
                                         start_velocity_rad_s=velocity)
         second = time_optimal_trajectory(rest, self.dynamics, space, self.limits)
@@ -151,14 +181,11 @@ class PlanTimer:
 
     def plan_and_time(self, request: PlanRequest, planner) -> TimedPlan:
         """Plan with ``planner`` in-process and time the plan: each free elbow branch is
-        planned (``plan_to_configuration``) and the fastest taken (``fastest_branch``); a
+        planned (``plan_to_configurations``) and the fastest taken (``fastest_branch``); a
         planner that cannot plan to a configuration chooses the branch itself."""
         started = time.perf_counter()
-        if hasattr(planner, 'plan_to_configuration'):
-            plans = [planner.plan_to_configuration(request.start_q, q)
-                     for q in self.ranking.validator.free_configurations(*request.goal.xy)]
-            best = self.ranking.fastest_branch([p for p in plans if p.ok])
-            plan = best if best is not None else (plans[0] if plans else None)
+        if hasattr(planner, 'plan_to_configurations'):
+            plan = self.ranking.plan(planner, request.start_q, request.goal.xy)
         else:
             plan = planner.plan(request.start_q, request.goal.xy)
         return replace(self.time_plan(request, plan), compute_s=time.perf_counter() - started)
@@ -174,27 +201,43 @@ class BranchRanking:
         self.clear_space = ForbiddenSpace(arm, arm.world.clearance_rad)
         self.limits = TrajectoryLimits.from_arm(arm)
 
-    def duration_s(self, waypoints) -> float:
-        """The path's duration from rest to rest, timed in full (inf when it cannot be)."""
-        space = self.clear_space if self.clear_space.path_is_free(waypoints) else self.forbidden
+    def preset_configurations(self) -> list:
+        """Every free elbow branch of every preset: the goals a robot keeps going to."""
+        return [q for _, x, y in self.validator.arm.presets
+                for q in self.validator.free_configurations(x, y)]
+
+    def plan(self, planner, start_q, goal_xy):
+        """What the planner node answers: of the goal's free elbow branches, the path
+        (``planner.plan_to_configurations``) that gets there soonest; with none free, or
+        none timed, the planner's own answer (its reason why not)."""
         try:
-            return time_optimal_trajectory(waypoints, self.dynamics, space,
-                                           self.limits).duration_s
-        except TrajectoryError:
-            return math.inf
+            branches = self.validator.free_configurations(*goal_xy)
+        except UnreachableError:
+            branches = []                  # out of reach: the planner's answer says so
+        plans = planner.plan_to_configurations(start_q, branches) if branches else []
+        fastest = self.fastest_branch([plan for plan in plans if plan.ok])
+        return fastest if fastest is not None else planner.plan(start_q, goal_xy)
+
+    def duration_s(self, waypoints) -> float:
+        """The path's duration from rest to rest, estimated with the first grid of bends
+        (``estimated_bent_duration_s``: the bend often decides which branch is faster)."""
+        space = self.clear_space if self.clear_space.path_is_free(waypoints) else self.forbidden
+        return estimated_bent_duration_s(waypoints, self.dynamics, space, self.limits)
 
     def fastest_branch(self, plans):
         """Of ``plans`` (each with ``waypoints_rad``), the one that gets there soonest: all
-        estimated quickly, those within the margin of the best timed in full."""
+        estimated quickly; when others come within the margin of the best, those are
+        estimated with their bend and the fastest of them wins."""
         if len(plans) <= 1:
             return plans[0] if plans else None
         estimates = [estimated_duration_s(p.waypoints_rad, self.dynamics, self.limits)
                      for p in plans]
         best = min(estimates)
-        timed = [(self.duration_s(p.waypoints_rad), k) for k, (p, estimate)
-                 in enumerate(zip(plans, estimates))
+        close = [k for k, estimate in enumerate(estimates)
                  if estimate <= best * (1.0 + BRANCH_SCREEN_MARGIN)]
-        duration, index = min(timed)
+        if len(close) == 1:
+            return plans[close[0]]
+        duration, index = min((self.duration_s(plans[k].waypoints_rad), k) for k in close)
         return plans[index] if math.isfinite(duration) else None
 
 

@@ -46,18 +46,20 @@ class FreeCells:
     -- its segments for shoulder angles in [c − h, c + h] lie in the triangle of the pivot
     and the two ends pushed out by 1/cos h (the chord between them touches the arc) -- and
     the forearm at c misses every rectangle grown by δ = (L_upper + 2·L_fore)·h: across the
-    cell no point of it moves more than L_upper·h + L_fore·2h.
+    cell no point of it moves more than L_upper·h + L_fore·2h. With ``pad_rad`` the same for
+    h + pad: every configuration of the cell is then free by that margin on both joints.
     """
 
     HALF_WIDTH_RAD = math.radians(0.25)
     TILE = 16                          # cells a side, proved together
 
-    def __init__(self, arm: ArmConfig):
-        h = self.HALF_WIDTH_RAD
+    def __init__(self, arm: ArmConfig, pad_rad: float = 0.0):
+        self.reach_rad = self.HALF_WIDTH_RAD + pad_rad      # the box proved around a centre
+        h = self.reach_rad
         self.space = ForbiddenSpace(arm)
         self.grown = ForbiddenSpace(arm, grow_m=(arm.shoulder.length_m
                                                  + 2.0 * arm.elbow.length_m) * h)
-        self.cell_rad = 2.0 * h
+        self.cell_rad = 2.0 * self.HALF_WIDTH_RAD
         self.low = self.space.limits[:, 0]
         self.counts = np.ceil((self.space.limits[:, 1] - self.low) / self.cell_rad).astype(int)
         self.free = np.zeros(self.counts, dtype=bool)
@@ -81,7 +83,7 @@ class FreeCells:
         cells = (tiles[:, None, :] * self.TILE + offsets).reshape(-1, 2)
         cells = cells[np.all(cells < self.counts, axis=-1)]
         centres = self.low + (cells + 0.5) * self.cell_rad
-        h = self.HALF_WIDTH_RAD * (1.0 + 1e-6)
+        h = self.reach_rad * (1.0 + 1e-6)
         space = self.space
         within = (np.all((centres - h >= space.limits[:, 0])
                          & (centres + h <= space.limits[:, 1]), axis=-1)
@@ -115,9 +117,9 @@ def _in_triangle(x, y, a, b, c) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=16)
-def free_cells(arm: ArmConfig) -> FreeCells:
-    """The one ``FreeCells`` of each arm, shared by every check of it."""
-    return FreeCells(arm)
+def free_cells(arm: ArmConfig, pad_rad: float = 0.0) -> FreeCells:
+    """The one ``FreeCells`` of each arm (and margin), shared by every check of it."""
+    return FreeCells(arm, pad_rad)
 
 
 # Checks of fewer configurations than this go through ``FreeCells``; a bigger batch (a
@@ -142,7 +144,7 @@ class ForbiddenSpace:
         # (``grow_m``: grown further, for ``FreeCells``' proofs.)
         grow = arm.world.clearance_m - 1e-9 + grow_m
         self._proves_cells = grow_m > 0.0
-        self._cells = None
+        self._cells = self._clear_cells = None
         self.rectangles = [
             (r.name, (r.x_min - grow, r.y_min - grow, r.x_max + grow, r.y_max + grow))
             for r in arm.world.regions]
@@ -167,16 +169,23 @@ class ForbiddenSpace:
 
     def collides(self, q, links=(0, 1)) -> np.ndarray:
         """Whether a point of either link (of ``links``: 0 the upper arm, 1 the forearm) lies
-        in a forbidden rectangle (limits aside): every rectangle at once, along a last
-        axis."""
+        in a forbidden rectangle (limits aside): every link and rectangle whose bounding
+        boxes meet (which a hit needs) tested at once."""
         q = np.asarray(q, dtype=float)
         hit = np.zeros(q.shape[:-1], dtype=bool)
         if not self.rectangles:
             return hit
-        segments = self._links(q)
+        flat = hit.reshape(-1)
+        x_min, y_min, x_max, y_max = self._bounds
         for link in links:
-            hit |= np.any(segments_hit_rectangle(*(end[..., None] for end in segments[link]),
-                                                 self._bounds), axis=-1)
+            x0, y0, x1, y1 = (end.reshape(-1, 1) for end in self._links(q)[link])
+            near = ((np.minimum(x0, x1) <= x_max) & (np.maximum(x0, x1) >= x_min)
+                    & (np.minimum(y0, y1) <= y_max) & (np.maximum(y0, y1) >= y_min))
+            sample, region = np.nonzero(near)
+            if len(sample):
+                meets = segments_hit_rectangle(x0[sample, 0], y0[sample, 0], x1[sample, 0],
+                                               y1[sample, 0], self._bounds[:, region])
+                flat[sample[meets]] = True
         return hit
 
     def forearm_collides(self, q) -> np.ndarray:
@@ -205,7 +214,9 @@ class ForbiddenSpace:
     def why_forbidden(self, q) -> str | None:
         """A sentence saying why q is forbidden, or None when it is free."""
         q = np.asarray(q, dtype=float)
-        if self.margin_rad > 0.0 and self._free(q) and not self.is_free(q):
+        if self.is_free(q):             # the common case, at the cost of one batch check
+            return None
+        if self.margin_rad > 0.0 and self._free(q):
             return f'within {math.degrees(self.margin_rad):.1f} deg of forbidden space'
         for joint, angle, (low, high) in zip(self.arm.joints, q, self.limits):
             if not low <= angle <= high:
@@ -235,9 +246,21 @@ class ForbiddenSpace:
 
     def clear_by(self, q, margin_rad: float) -> np.ndarray | bool:
         """Free, and so is every configuration within ``margin_rad`` of q on both joints
-        (checked at the corners and edge midpoints of that square)."""
+        (checked at the corners and edge midpoints of that square; for this space's own
+        margin, at once where q lies in a cell proved free by it as a whole)."""
         q = np.asarray(q, dtype=float)
-        clear = np.all(self._free(q[..., None, :] + margin_rad * _SQUARE), axis=-1)
+        flat = q.reshape(-1, 2)
+        if margin_rad != self.margin_rad or self._proves_cells or len(flat) > _CELLS_UP_TO:
+            clear = np.all(self._free(flat[:, None, :] + margin_rad * _SQUARE), axis=-1)
+        else:
+            if self._clear_cells is None:
+                self._clear_cells = free_cells(self.arm, margin_rad)
+            clear = self._clear_cells.contain(flat)
+            rest = ~clear
+            if np.any(rest):
+                clear[rest] = np.all(self._free(flat[rest][:, None, :] + margin_rad * _SQUARE),
+                                     axis=-1)
+        clear = clear.reshape(q.shape[:-1])
         return bool(clear) if clear.ndim == 0 else clear
 
     def nearest_clear(self, q, margin_rad: float, reach_rad: float) -> np.ndarray | None:

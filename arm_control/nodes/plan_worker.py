@@ -8,6 +8,12 @@ its stdin and stdout: it imports only the timing code (multiprocessing's spawn w
 the node's whole module again, rclpy and all, and a fork would copy the DDS threads' locks).
 It runs at normal priority, and dies with the node: its stdin closes when the node's
 process goes.
+
+A plan from rest is answered twice: first a quick trajectory the arm starts on at once, then
+its refinement (``PlanTimer.refine``) from a hand-over time a safe margin past when the
+refinement is expected to be ready -- unless a newer request is already waiting. Once
+ready, the worker answers a move between two presets for itself, so the first goal finds its
+caches warm.
 """
 
 from multiprocessing.connection import Connection
@@ -15,16 +21,52 @@ import os
 import subprocess
 import sys
 import threading
+import time
+
+import numpy as np
 
 from arm_control.config import ArmConfig
+from arm_control.control.goals import Goal
 from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
 from arm_control.control.trajectory.moving_start import toppra_solver
 
 
+# The refinement's hand-over comes this many times its expected time after the quick
+# trajectory starts, and never sooner than this; its time is expected from the quick
+# timing's, at the largest ratio seen lately, an older one weighing this much less with
+# each goal (``HandoverClock``).
+HANDOVER_SAFETY = 1.5
+MIN_HANDOVER_S = 0.03
+# ... and never later than this share of the quick trajectory (a later one gains little).
+HANDOVER_SHARE = 0.4
+FIRST_RATIO = 12.0
+RATIO_MEMORY = 0.7
+
+
+class HandoverClock:
+    """When a refinement can surely be ready: its time is expected as a multiple of the
+    quick timing's (both grow with the path and with the machine's load), the multiple the
+    largest seen lately."""
+
+    def __init__(self):
+        self.ratio = FIRST_RATIO
+
+    def handover_s(self, quick_s: float, duration_s: float) -> float:
+        """The hand-over for a quick timing that took ``quick_s`` (wall) and lasts
+        ``duration_s``."""
+        return min(max(MIN_HANDOVER_S, HANDOVER_SAFETY * self.ratio * quick_s),
+                   HANDOVER_SHARE * duration_s)
+
+    def seen(self, quick_s: float, refine_s: float) -> None:
+        self.ratio = max(RATIO_MEMORY * self.ratio, refine_s / max(quick_s, 1e-4))
+
+
 def _serve(requests: Connection, results: Connection) -> None:
     """The worker: (arm, config) first, then time each (request, plan) that comes in and
-    send back the TimedPlan; new (arm, config) when the settings change at run time."""
+    send back the TimedPlan (from rest: the quick one, then its refinement); new (arm,
+    config) when the settings change at run time."""
     timer = None
+    clock = HandoverClock()
     while True:
         try:
             item = requests.recv()
@@ -40,13 +82,49 @@ def _serve(requests: Connection, results: Connection) -> None:
                 # The moving-start solver's import (0.8 s) done meanwhile, not at the first
                 # goal that preempts another.
                 threading.Thread(target=toppra_solver, daemon=True).start()
+                _warm_up(timer, clock)
             continue
-        request, plan = item
-        try:
-            timed = timer.time_plan(request, plan)
-        except Exception as error:              # never leave a goal hanging
-            timed = TimedPlan(request, None, f'timing the plan failed: {error!r}')
-        results.send(timed)
+        _answer(timer, clock, *item, results.send, requests.poll)
+
+
+def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, send,
+            newer) -> None:
+    """Time ``plan`` for ``request`` and ``send`` the answer; from rest, the quick one, then
+    (unless ``newer()``: another request waits) its refinement."""
+    from_rest = request.start_time_s is None
+    began = time.perf_counter()
+    try:
+        timed = timer.time_plan(request, plan, quick=from_rest)
+    except Exception as error:              # never leave a goal hanging
+        timed = TimedPlan(request, None, f'timing the plan failed: {error!r}')
+    send(timed)
+    quick_s = time.perf_counter() - began
+    if not (from_rest and timed.ok) or newer():
+        return
+    began = time.perf_counter()
+    try:
+        refined = timer.refine(timed, clock.handover_s(quick_s, timed.trajectory.duration_s))
+    except Exception:                       # the quick trajectory carries on
+        refined = None
+    clock.seen(quick_s, time.perf_counter() - began)
+    if refined is not None:
+        send(refined)
+
+
+def _warm_up(timer: PlanTimer, clock: HandoverClock) -> None:
+    """Answer a move between the first two presets and throw the answers away: the first
+    goal then finds the caches warm (the forbidden-space cells the checks prove, numpy's
+    first calls) and the hand-over clock set."""
+    presets = timer.arm.presets
+    if len(presets) < 2:
+        return
+    (_, x0, y0), (_, x1, y1) = presets[:2]
+    starts = timer.ranking.validator.free_configurations(x0, y0)
+    goals = timer.ranking.validator.free_configurations(x1, y1)
+    if starts and goals:
+        request = PlanRequest(0, Goal(x1, y1, 'warm-up'), starts[0], (0.0, 0.0), None, 0.0)
+        _answer(timer, clock, request, PathPlan(np.array([starts[0], goals[0]])),
+                lambda timed: None, lambda: False)
 
 
 class PlanWorker:

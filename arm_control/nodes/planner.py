@@ -9,7 +9,9 @@ angles with ``arm_control.planning.planner.waypoints_from_poses``). An empty pat
 plan; the reason is logged.
 
 Publishes ``planned_path`` (Path, latched: the last successful plan), ``cspace_map``
-(OccupancyGrid, latched, published once at start) and ``/diagnostics``.
+(OccupancyGrid, latched, published once at start) and ``/diagnostics``. In its first second
+it builds the shortest-path trees toward every preset's elbow branches (``Planner.prepare``),
+so that plans to a preset need no search.
 
 ``cspace_map`` is the configuration space as a map in frame ``cspace`` (set RViz's fixed
 frame to it): cell (i, j) = (shoulder cell i, elbow cell j), so x is the shoulder angle and
@@ -34,13 +36,13 @@ from arm_control.config import ArmConfig, FRAME_ID, PlannerConfig
 from arm_control.control.events import quote
 from arm_control.control.goals import PLANE_TOLERANCE_M
 from arm_control.control.plans import BranchRanking
-from arm_control.model.kinematics import UnreachableError
 from arm_control.nodes import messages
 from arm_control.nodes.common import declare_parameters, LATCHED, run, status
 from arm_control.planning.planner import Planner, poses_from_waypoints
 
 CSPACE_FRAME = 'cspace'
 POSE_TOLERANCE_M = 0.001          # a start pose must be a pose of this arm within this
+PREPARE_PERIOD_S = 0.05           # one preset branch's shortest-path tree per this, at start
 
 
 class RequestError(ValueError):
@@ -85,12 +87,25 @@ class PlannerNode(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_service(GetPlan, 'plan_path', self.on_plan_path)
         self.create_timer(1.0, self.publish_diagnostics)
+        # While idle after start-up, one preset branch's tree per tick (Planner.prepare).
+        self.to_prepare = self.ranking.preset_configurations()
+        self.prepare_timer = self.create_timer(PREPARE_PERIOD_S, self.prepare_next)
         self.map_pub.publish(self.cspace_map())
         grid = self.planner.grid
         self.get_logger().info(
             f'configuration space: {grid.shoulder.count} x {grid.elbow.count} cells of '
             f'{math.degrees(grid.resolution_rad):.2f} deg, {100 * grid.free.mean():.0f}% free, '
             f'{len(self.arm.world.regions)} forbidden regions; built in {self.build_s:.2f} s')
+
+    def prepare_next(self) -> None:
+        if not self.to_prepare:
+            self.prepare_timer.cancel()
+            return
+        try:
+            self.planner.prepare(self.to_prepare.pop(0))
+        except Exception as error:                  # a failed table is no reason to stop
+            self.get_logger().error(f'preparing the preset paths failed: {error!r}')
+            self.to_prepare = []
 
     # plan_path
 
@@ -146,14 +161,8 @@ class PlannerNode(Node):
 
     def plan(self, start_q, goal_xy):
         """The elbow branch that gets there soonest, as the controller would choose it
-        (``BranchRanking``); the planner's own choice for a goal without a clear branch."""
-        try:
-            branches = self.ranking.validator.free_configurations(*goal_xy)
-        except UnreachableError:
-            branches = []                  # out of reach: the planner's answer says so
-        plans = [self.planner.plan_to_configuration(start_q, q) for q in branches]
-        fastest = self.ranking.fastest_branch([plan for plan in plans if plan.ok])
-        return fastest if fastest is not None else self.planner.plan(start_q, goal_xy)
+        (``BranchRanking.plan``); the planner's own choice for a goal without a clear branch."""
+        return self.ranking.plan(self.planner, start_q, goal_xy)
 
     def check_frame(self, header, what: str) -> None:
         if header.frame_id not in ('', FRAME_ID):

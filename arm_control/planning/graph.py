@@ -261,24 +261,48 @@ class ConfigurationGrid:
         Returns (nodes, cost, target index) or None when no path exists; raises
         RuntimeError past ``max_searches`` re-searches.
         """
-        target_nodes = np.asarray(target_nodes, dtype=int)
-        target_costs = np.asarray(target_costs, dtype=float)
-        if len(target_nodes) == 0 or len(source_nodes) == 0:
-            return None
+        return self.shortest_path_each(source_nodes, source_costs,
+                                       [(target_nodes, target_costs)], method, max_searches,
+                                       guess)[0]
+
+    def shortest_path_each(self, source_nodes, source_costs, groups, method: str = 'scipy',
+                           max_searches: int = 50, guess: float = math.inf):
+        """``shortest_path`` to each group of targets ((nodes, costs) pairs, e.g. the
+        goal's elbow branches), all from the same searches: a blocked edge found on one
+        group's path is cut and the search runs again for the groups still open."""
+        groups = [(np.asarray(nodes, dtype=int), np.asarray(costs, dtype=float))
+                  for nodes, costs in groups]
+        found = [None] * len(groups)
+        open_groups = [g for g, (nodes, _) in enumerate(groups) if len(nodes)]
+        if len(source_nodes) == 0:
+            return found
         limit = guess if method == 'scipy' else math.inf   # heapq stops at the targets
         for _ in range(max_searches):
+            if not open_groups:
+                return found
+            targets = np.concatenate([groups[g][0] for g in open_groups])
             distance, predecessor = self.shortest_paths(source_nodes, source_costs, method,
-                                                        target_nodes, limit)
-            totals = distance[target_nodes] + target_costs
-            best = int(np.argmin(totals))
-            if not totals[best] <= limit:
-                if math.isinf(limit):
-                    return None
-                limit = math.inf                           # the guess was short
-                continue
-            nodes = path_to(int(target_nodes[best]), predecessor, self.node_count)
-            if self.check_path_edges(nodes):
-                return nodes, float(totals[best]), best
+                                                        targets, limit)
+            still, wider = [], False
+            for g in open_groups:
+                nodes, costs = groups[g]
+                totals = distance[nodes] + costs
+                best = int(np.argmin(totals))
+                if not totals[best] <= limit:
+                    if not math.isinf(limit):              # the guess was short
+                        still.append(g)
+                        wider = True
+                    continue                               # else no path: None
+                path = path_to(int(nodes[best]), predecessor, self.node_count)
+                if self.check_path_edges(path):
+                    found[g] = (path, float(totals[best]), best)
+                else:
+                    still.append(g)
+            open_groups = still
+            if wider:
+                limit = math.inf
+        if not open_groups:
+            return found
         raise RuntimeError(f'{max_searches} searches in a row found a blocked grid edge')
 
     def shortest_paths(self, source_nodes, source_costs, method: str = 'scipy',

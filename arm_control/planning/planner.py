@@ -19,11 +19,14 @@ from arm_control.config import ArmConfig, PlannerConfig
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.graph import ConfigurationGrid, segments_free
+from arm_control.planning.trees import GoalTrees
 
 # Lazily found blocked edges are cut and the search re-run at most this often per query.
 MAX_SEARCHES = 50
 # A segment is first sampled this many times more coarsely: most blocked ones fail there.
 COARSE_FACTOR = 10
+# ... and a shortcut candidate before that, this many times.
+SIGHT_FACTOR = 30
 # Shortcut candidates that pass the coarse check are checked finely, farthest first, this
 # many, each first at a step this many times coarser (a grazing segment fails there).
 MAX_FINE_CHECKS = 6
@@ -92,6 +95,7 @@ class Planner:
         self.forbidden = ForbiddenSpace(arm)
         self.grid = ConfigurationGrid(self.forbidden, config.grid_resolution_rad,
                                       arm.world.check_step_rad)
+        self.trees = GoalTrees(self.grid)
 
     # Public
 
@@ -119,21 +123,46 @@ class Planner:
             return Plan.failure(
                 f'the goal ({goal_xy[0]:.3f}, {goal_xy[1]:.3f}) m is forbidden on both elbow '
                 f'branches: {"; ".join(refusals)}')
-        return self._search(start, goals)
+        return self._search(start, goals)[0]
 
     def plan_to_configuration(self, start_q, goal_q) -> Plan:
         """From ``start_q`` to the configuration ``goal_q`` (taken into the joint travel)."""
+        return self.plan_to_configurations(start_q, [goal_q])[0]
+
+    def plan_to_configurations(self, start_q, goals_q) -> list[Plan]:
+        """``plan_to_configuration`` to each of ``goals_q`` (e.g. a goal's elbow branches):
+        one grid search serves them all."""
         start = self._start(start_q)
         if isinstance(start, Plan):
-            return start
-        goal_q = np.asarray(goal_q, dtype=float).ravel()
-        if goal_q.shape != (2,) or not np.all(np.isfinite(goal_q)):
-            return Plan.failure(f'the goal configuration must be two finite angles, '
-                                f'got {goal_q.tolist()}')
-        goal, why = self._goal(goal_q)
-        if why is not None:
-            return Plan.failure(f'the goal configuration {_degrees(goal_q)} is forbidden: {why}')
-        return self._search(start, [goal])
+            return [start] * len(goals_q)
+        plans, goals, where = [], [], []
+        for goal_q in goals_q:
+            goal_q = np.asarray(goal_q, dtype=float).ravel()
+            if goal_q.shape != (2,) or not np.all(np.isfinite(goal_q)):
+                plans.append(Plan.failure(f'the goal configuration must be two finite angles, '
+                                          f'got {goal_q.tolist()}'))
+                continue
+            goal, why = self._goal(goal_q)
+            if why is not None:
+                plans.append(Plan.failure(f'the goal configuration {_degrees(goal_q)} is '
+                                          f'forbidden: {why}'))
+                continue
+            plans.append(None)
+            goals.append(goal)
+            where.append(len(plans) - 1)
+        for k, plan in zip(where, self._search(start, goals, each=True) if goals else []):
+            plans[k] = plan
+        return plans
+
+    def prepare(self, goal_q) -> bool:
+        """Build the shortest-path tree toward the configuration ``goal_q`` (a preset's
+        branch: ``trees``), so that plans to it need no search; False when it is forbidden
+        or already prepared."""
+        goal, why = self._goal(np.asarray(goal_q, dtype=float).ravel())
+        if why is not None or goal in self.trees:
+            return False
+        self.trees.build(goal, self.grid.connections(goal, toward=True))
+        return True
 
     # Ends
 
@@ -167,65 +196,99 @@ class Planner:
         coarse = self.forbidden.segment_is_free(q_from, q_to, coarse_factor * step)
         return coarse and self.forbidden.segment_is_free(q_from, q_to, step)
 
-    def _search(self, start: np.ndarray, goals: list[np.ndarray]) -> Plan:
+    def _search(self, start: np.ndarray, goals: list[np.ndarray], each: bool = False):
+        """[the plan to the cheapest of ``goals``], or with ``each`` a plan to each of them,
+        from one grid search (a start inside forbidden space: one search per goal, each
+        with its own way out)."""
+        if each and len(goals) > 1 and not self.forbidden.is_free(start):
+            return [self._search(start, [goal])[0] for goal in goals]
+        groups = [[k] for k in range(len(goals))] if each else [list(range(len(goals)))]
         start_free = bool(self.forbidden.is_free(start))
         lower_bounds = [float(np.abs(goal - start).sum()) for goal in goals]
+        plans = [None] * len(groups)
         if start_free:
             # A free straight segment costs exactly the lower bound |Δθa| + |Δθb|.
-            direct = [k for k, goal in enumerate(goals) if self.segment_is_free(start, goal)]
-            if direct:
-                best = min(direct, key=lambda k: lower_bounds[k])
-                if lower_bounds[best] <= min(lower_bounds):
-                    return Plan.through([start, goals[best]])
+            direct = [self.segment_is_free(start, goal) for goal in goals]
+            for g, members in enumerate(groups):
+                best = min(members, key=lambda k: (not direct[k], lower_bounds[k]))
+                if direct[best] and lower_bounds[best] <= min(lower_bounds[k] for k in members):
+                    plans[g] = Plan.through([start, goals[best]])
+        if all(plans):
+            return plans
 
         grid = self.grid
-        goal_links = [grid.connections(goal, toward=True) for goal in goals]
-        goal_labels = {int(label) for nodes, _ in goal_links
-                       for label in grid.components[nodes]}
-        if not goal_labels:
-            return Plan.failure(
-                'no connection: the free space around the goal is narrower than the planner '
-                f'grid ({math.degrees(grid.resolution_rad):.2f} deg); try a finer '
-                'grid_resolution_rad')
+        links = [grid.connections(goal, toward=True) for goal in goals]
+        labels = [{int(label) for k in members for label in grid.components[links[k][0]]}
+                  for members in groups]
+        narrow = Plan.failure(
+            'no connection: the free space around the goal is narrower than the planner grid '
+            f'({math.degrees(grid.resolution_rad):.2f} deg); try a finer grid_resolution_rad')
+        plans = [plan or (None if labels[g] else narrow) for g, plan in enumerate(plans)]
+        open_groups = [g for g, plan in enumerate(plans) if plan is None]
+        if not open_groups:
+            return plans
         escape = None
         if start_free:
             source_nodes, source_costs = grid.connections(start, toward=False)
             if len(source_nodes) == 0:
-                return Plan.failure(
+                boxed = Plan.failure(
                     f'no connection: the start {_degrees(start)} is boxed in by forbidden '
                     'space closer than the planner grid reaches')
+                return [plan or boxed for plan in plans]
         else:
-            escape = self._way_out(start, goal_labels)
+            escape = self._way_out(start, set().union(*(labels[g] for g in open_groups)))
             if escape is None:
-                return Plan.failure(
+                trapped = Plan.failure(
                     f'no connection: the start {_degrees(start)} is in forbidden space '
                     f'({self.forbidden.why_forbidden(start)}) and no free configuration '
                     'connected to the goal exists')
+                return [plan or trapped for plan in plans]
             source_nodes = np.array([escape])
             source_costs = np.abs(grid.configurations[escape] - start).sum(keepdims=True)
-        if not goal_labels & {int(label) for label in grid.components[source_nodes]}:
-            return Plan.failure(
-                f'no connection: forbidden space separates the start {_degrees(start)} from '
-                'the goal; no collision-free path joins them')
-
-        targets = np.concatenate([nodes for nodes, _ in goal_links])
-        target_costs = np.concatenate([costs for _, costs in goal_links])
-        which_goal = np.repeat(np.arange(len(goals)), [len(nodes) for nodes, _ in goal_links])
+        source_labels = {int(label) for label in grid.components[source_nodes]}
+        separated = Plan.failure(
+            f'no connection: forbidden space separates the start {_degrees(start)} from the '
+            'goal; no collision-free path joins them')
+        for g in open_groups:
+            if not labels[g] & source_labels:
+                plans[g] = separated
+        open_groups = [g for g in open_groups if plans[g] is None]
+        if not open_groups:
+            return plans
+        if each and escape is None:                 # a goal with a tree needs no search
+            for g in open_groups:
+                found = self.trees.path(goals[g], source_nodes, source_costs)
+                if found is not None:
+                    plans[g] = self._finish(start, goals[g], found[0], escape)
+            open_groups = [g for g in open_groups if plans[g] is None]
+            if not open_groups:
+                return plans
+        targets = [(np.concatenate([links[k][0] for k in groups[g]]),
+                    np.concatenate([links[k][1] for k in groups[g]])) for g in open_groups]
+        # Most detours cost well under half as much again as the straight move.
+        guess = SEARCH_GUESS_FACTOR * max(min(lower_bounds[k] for k in groups[g])
+                                          for g in open_groups) + SEARCH_GUESS_MARGIN_RAD
         try:
-            # Most detours cost well under half as much again as the straight move.
-            guess = SEARCH_GUESS_FACTOR * min(lower_bounds) + SEARCH_GUESS_MARGIN_RAD
-            found = grid.shortest_path(source_nodes, source_costs, targets, target_costs,
-                                       self.search, MAX_SEARCHES, guess)
+            found = grid.shortest_path_each(source_nodes, source_costs, targets, self.search,
+                                            MAX_SEARCHES, guess)
         except RuntimeError:
-            return Plan.failure('no connection found: too many grid edges turned out blocked '
-                                'by thin forbidden regions; try a finer grid_resolution_rad')
-        if found is None:
-            return Plan.failure(
-                f'no connection: forbidden space separates the start {_degrees(start)} '
-                'from the goal; no collision-free path joins them')
-        nodes, _, target = found
-        goal = goals[which_goal[target]]
-        middle = grid.configurations[nodes]
+            blocked = Plan.failure('no connection found: too many grid edges turned out '
+                                   'blocked by thin forbidden regions; try a finer '
+                                   'grid_resolution_rad')
+            return [plan or blocked for plan in plans]
+        for g, result in zip(open_groups, found):
+            if result is None:
+                plans[g] = separated
+                continue
+            nodes, _, target = result
+            goal = goals[np.repeat(groups[g], [len(links[k][0]) for k in groups[g]])[target]]
+            plans[g] = self._finish(start, goal, nodes, escape)
+        return plans
+
+    def _finish(self, start, goal, nodes, escape) -> Plan:
+        """The plan along the grid path ``nodes``: from the start (or its way out) to the
+        goal, shortcut."""
+        middle = self.grid.configurations[nodes]
         path = self._shortcut(np.vstack([middle, goal] if escape is not None
                                         else [start, middle, goal]))
         if path is None:
@@ -264,8 +327,10 @@ class Planner:
             ahead = corners[corners > anchor + 1]
             if len(ahead) > MAX_CANDIDATES:               # evenly spread, the last included
                 ahead = ahead[np.linspace(0, len(ahead) - 1, MAX_CANDIDATES).round().astype(int)]
-            in_sight = ahead[segments_free(self.forbidden, np.broadcast_to(path[anchor], (
-                len(ahead), 2)), path[ahead], COARSE_FACTOR * step)]
+            for factor in (SIGHT_FACTOR, COARSE_FACTOR):     # coarsest first: cheap misses
+                ahead = ahead[segments_free(self.forbidden, np.broadcast_to(
+                    path[anchor], (len(ahead), 2)), path[ahead], factor * step)]
+            in_sight = ahead
             chosen = anchor + 1
             for corner in in_sight[::-1][:MAX_FINE_CHECKS]:
                 if self.segment_is_free(path[anchor], path[corner], MIDDLE_FACTOR):

@@ -27,9 +27,10 @@ from arm_control.control.trajectory.exact import durations, fastest_speeds
 from arm_control.control.trajectory.limits import TrajectoryError, TrajectoryLimits
 from arm_control.control.trajectory.moving_start import stopping_distance
 from arm_control.control.trajectory.path import (BlendedPath, clean_waypoints, clustered,
-                                                 FINE_GRID, free_blends, free_length,
-                                                 grid_for, initial_radii, split_at_stops,
-                                                 turn_angle, unit)
+                                                 COARSE_GRID, FINE_GRID, free_blends,
+                                                 free_length, grid_for, initial_radii,
+                                                 QUICK_GRID, split_at_stops, turn_angle,
+                                                 unit)
 from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
 from arm_control.control.trajectory.shaping import best_shape, free_shape, SEARCH_STAGES
 from arm_control.control.trajectory.timed import Trajectory
@@ -38,9 +39,10 @@ from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.electrical import PowerSupply
 from arm_control.model.world import ForbiddenSpace
 
-__all__ = ['BlendedPath', 'estimated_duration_s', 'PeriodFeedforward',
-           'sure_acceleration_rad_s2', 'time_optimal_trajectory', 'Trajectory',
-           'TrajectoryError', 'TrajectoryLimits']
+__all__ = ['BlendedPath', 'estimated_bent_duration_s', 'estimated_duration_s',
+           'PeriodFeedforward',
+           'refined_trajectory', 'sure_acceleration_rad_s2', 'time_optimal_trajectory',
+           'Trajectory', 'TrajectoryError', 'TrajectoryLimits']
 
 # A moving start that must turn by more than this first tries braking, then bending.
 _BRAKE_FIRST_TURN_RAD = math.radians(130.0)
@@ -53,7 +55,7 @@ class _StartUnreachable(Exception):
 def time_optimal_trajectory(waypoints_rad, dynamics: ArmDynamics, forbidden: ForbiddenSpace,
                             limits: TrajectoryLimits, start_velocity_rad_s=(0.0, 0.0),
                             check_step_rad: float = 0.001745,
-                            reshape: bool = True) -> Trajectory:
+                            reshape: bool = True, quick: bool = False) -> Trajectory:
     """The fastest trajectory along the planner's path within the arm's limits.
 
     ``waypoints_rad`` (n, 2): a piecewise-linear joint-space path whose first point is where
@@ -61,8 +63,10 @@ def time_optimal_trajectory(waypoints_rad, dynamics: ArmDynamics, forbidden: For
     path first bends smoothly from that direction into the first segment, or when it cannot
     turn in time, brakes along its direction of motion and comes back) and ends at rest
     exactly on the last waypoint. From rest, with every corner blended, the whole path is
-    bent where that is faster (``reshape=False``: never). Raises TrajectoryError when no
-    such trajectory exists.
+    bent where that is faster (``reshape=False``: never). ``quick``: not bent, and timed on
+    a few dozen stages (a few milliseconds, a fraction of a percent slower): a trajectory to
+    start on at once while the fine one is found (``refined_trajectory``). Raises
+    TrajectoryError when no such trajectory exists.
     """
     points = clean_waypoints(waypoints_rad)
     velocity = np.asarray(start_velocity_rad_s, dtype=float).reshape(2)
@@ -79,7 +83,7 @@ def time_optimal_trajectory(waypoints_rad, dynamics: ArmDynamics, forbidden: For
 
     if speed == 0.0:
         plans = [lambda: _follow(points, None, dynamics, forbidden, limits, check_step_rad,
-                                 reshape)]
+                                 reshape and not quick, quick)]
     else:                   # bend the motion onto the path; failing that, brake and return
         plans = [lambda: _follow(points, velocity, dynamics, forbidden, limits,
                                  check_step_rad),
@@ -100,6 +104,33 @@ def time_optimal_trajectory(waypoints_rad, dynamics: ArmDynamics, forbidden: For
     raise TrajectoryError(failure)
 
 
+def refined_trajectory(quick: Trajectory, handover_s: float, dynamics: ArmDynamics,
+                       forbidden: ForbiddenSpace, limits: TrajectoryLimits,
+                       check_step_rad: float = 0.001745):
+    """The rest of ``quick``'s path from where it is at ``handover_s`` (moving), bent where
+    that is faster and timed finely: (the trajectory from there, which the arm takes over at
+    ``handover_s``), or None when it would not arrive sooner than ``quick`` (or there is
+    none). The hand-over keeps the position and velocity; the bend keeps the direction."""
+    located = quick.path_at(handover_s)
+    if located is None:
+        return None
+    path, s = located
+    q, velocity, _ = quick.sample(handover_s)
+    ahead = path.knots[1:-1] > s + 1e-9
+    points = np.vstack([q, path.points[1:-1][ahead], path.points[-1]])
+    if np.linalg.norm(points[-1] - q) < 1e-6:
+        return None
+    try:
+        pieces = _follow(clean_waypoints(points), np.asarray(velocity, float), dynamics,
+                         forbidden, limits, check_step_rad, reshape=True)
+        refined = verified(pieces, q, quick.end_rad, dynamics, limits)
+    except (TrajectoryError, _StartUnreachable):
+        return None
+    if handover_s + refined.duration_s >= quick.duration_s:
+        return None
+    return refined
+
+
 def estimated_duration_s(waypoints_rad, dynamics: ArmDynamics, limits: TrajectoryLimits) -> float:
     """A quick estimate (a millisecond or two) of how long the path takes from rest to rest:
     the planner's polyline with its corners rounded (not checked) and not reshaped, timed on
@@ -118,6 +149,22 @@ def estimated_duration_s(waypoints_rad, dynamics: ArmDynamics, limits: Trajector
     A, B, C, D, W = rows(terms, limits)
     speeds = fastest_speeds(A, B, C, D, W, speed_caps(limits, terms.dq), steps)
     return float(durations(steps, speeds)[0])
+
+
+def estimated_bent_duration_s(waypoints_rad, dynamics: ArmDynamics, forbidden: ForbiddenSpace,
+                              limits: TrajectoryLimits) -> float:
+    """A closer estimate (a few milliseconds) of the path's duration from rest to rest: its
+    corners rounded (not checked), the first grid of bends tried, timed on a coarse grid
+    under the unbent path's bus. For ranking paths whose quick estimates come close; inf when
+    the arm cannot follow the path."""
+    try:
+        points = clean_waypoints(waypoints_rad)
+    except TrajectoryError:
+        return math.inf
+    if len(points) < 2:
+        return 0.0
+    return best_shape(BlendedPath(points, initial_radii(points)), dynamics, forbidden, limits,
+                      steps=())[2]
 
 
 def sure_acceleration_rad_s2(dynamics: ArmDynamics, forbidden, voltage: float,
@@ -147,11 +194,17 @@ def sure_acceleration_rad_s2(dynamics: ArmDynamics, forbidden, voltage: float,
 
 
 def _timed_piece(points, radii, dynamics, limits, start_speed, start_direction=None,
-                 start_radius=0.0, shape=None, bus_hint=None) -> TimedPiece:
-    path = BlendedPath(points, radii, start_direction, start_radius, shape)
-    grid = grid_for(path, FINE_GRID) if start_speed == 0.0 else grid_for(path)
+                 start_radius=0.0, shape=None, bus_hint=None, quick=False) -> TimedPiece:
+    path = BlendedPath(points, radii, start_direction, start_radius, shape,
+                       flat_start=start_speed > 0.0)
+    if quick:
+        grid = grid_for(path, QUICK_GRID)
+    else:
+        grid = grid_for(path, FINE_GRID if start_speed == 0.0 or shape is not None
+                        else COARSE_GRID)
     terms = PathTerms.along(dynamics, path, grid)
-    x, reachable, bus = time_piece(path, grid, terms, limits, start_speed, bus_hint=bus_hint)
+    x, reachable, bus = time_piece(path, grid, terms, limits, start_speed, bus_hint=bus_hint,
+                                   coarse=quick)
     if x is None and start_speed == 0.0:
         raise TrajectoryError('the arm cannot follow the path within its limits: it cannot '
                               'hold still somewhere along it')
@@ -159,7 +212,7 @@ def _timed_piece(points, radii, dynamics, limits, start_speed, start_direction=N
         raise _StartUnreachable(
             f'cannot take the path from a start speed of {start_speed:.3f} rad/s: '
             f'at most {math.sqrt(max(reachable, 0.0)):.3f} rad/s is controllable')
-    return TimedPiece(path, grid, terms, x, bus)
+    return TimedPiece(path, grid, terms, x, bus, quick)
 
 
 def _reference_acceleration(q, velocity, dynamics, limits) -> float:
@@ -198,8 +251,10 @@ def _brake_then_follow(points, velocity, dynamics, forbidden, limits, step_rad):
     raise _StartUnreachable(f'moving at {speed:.2f} rad/s, the arm cannot brake in time')
 
 
-def _follow(points, velocity, dynamics, forbidden, limits, step_rad, reshape=False):
-    """Blend the corners (and the start bend when moving), then time each piece."""
+def _follow(points, velocity, dynamics, forbidden, limits, step_rad, reshape=False,
+            quick=False):
+    """Blend the corners (and the start bend when moving), then time each piece (``quick``:
+    on few stages)."""
     radii = initial_radii(points)
     start_direction, start_radius = None, 0.0
     speed = 0.0
@@ -223,17 +278,19 @@ def _follow(points, velocity, dynamics, forbidden, limits, step_rad, reshape=Fal
                                       start_radius, ignore_until)
     if speed > 0.0 and start_direction is not None and start_radius == 0.0:
         raise _StartUnreachable('no free room to bend the current motion onto the path')
-    if reshape and speed == 0.0 and ignore_until < 0.0 and np.all(radii > 0.0) \
-            and hasattr(forbidden, 'arm'):
-        # From rest along one piece: bend the whole path where that is faster.
-        shape, bus = best_shape(points, radii, dynamics, forbidden, limits)
-        shape = free_shape(points, radii, shape, forbidden, step_rad)
-        return [_timed_piece(points, radii, dynamics, limits, 0.0, shape=shape, bus_hint=bus)]
+    if reshape and ignore_until < 0.0 and np.all(radii > 0.0) and hasattr(forbidden, 'arm'):
+        # Along one piece: bend the whole path where that is faster (leaving a moving
+        # start's direction alone).
+        base = BlendedPath(points, radii, start_direction, start_radius, flat_start=speed > 0)
+        shape, bus, _ = best_shape(base, dynamics, forbidden, limits, speed)
+        shape = free_shape(base, shape, forbidden, step_rad)
+        return [_timed_piece(points, radii, dynamics, limits, speed, start_direction,
+                             start_radius, shape=shape, bus_hint=bus)]
     pieces = []
     for i, (piece_points, piece_radii) in enumerate(split_at_stops(points, radii)):
         first_piece = i == 0
         pieces.append(_timed_piece(piece_points, piece_radii, dynamics, limits,
                                    speed if first_piece else 0.0,
                                    start_direction if first_piece else None,
-                                   start_radius if first_piece else 0.0))
+                                   start_radius if first_piece else 0.0, quick=quick))
     return pieces

@@ -106,6 +106,70 @@ def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
     return speed
 
 
+class OnePath:
+    """``fastest_speeds`` for one path on one grid, under many bus sags (the bus iteration
+    times a path again and again): what does not depend on the sag is worked out once.
+
+    Rows as ``rows.rows(..., per_point=True)``: the first ``voltage_rows`` are the motors'
+    volts with W (n, rows) their half-widths at no sag; a sag per grid point narrows those
+    to W − sag, never below ``least``. The same speeds as ``fastest_speeds`` with the rows
+    ``rows.rows`` gives at that sag.
+    """
+
+    def __init__(self, A, B, C, D, W, top, steps, voltage_rows=2, least=1e-3):
+        self.voltage_rows, self.least = voltage_rows, least
+        self.W, self.top = np.asarray(W, float), np.asarray(top, float)
+        sign = np.where(A >= 0.0, 1.0, -1.0)
+        size = np.abs(A)
+        self.sign_c = sign * C
+        self.bounded = size > 1e-12
+        with np.errstate(divide='ignore'):
+            self.inverse = np.where(self.bounded, 1.0 / size, 0.0)
+        j, m = np.nonzero(~np.eye(A.shape[-1], dtype=bool))     # every ordered pair of rows
+        left, right = sign[:, j] * size[:, m], sign[:, m] * size[:, j]
+        self.pairs = (j, m, size[:, m], size[:, j], left * B[:, j] - right * B[:, m],
+                      left * D[:, j] - right * D[:, m], left * C[:, j] - right * C[:, m])
+        twice = 2.0 * np.asarray(steps, float)
+        self.stage = twice[:, None]
+        self.twice = twice.tolist()
+        inverse = self.inverse
+        slope_x, slope_y = -sign * B * inverse, -sign * D * inverse
+        # Per stage and row, as ``fastest_speeds``: slopes, constant (set per sag), α, β,
+        # γ (set per sag) and |A| of the other end.
+        self.backward = np.stack([slope_x[1:], slope_y[1:], slope_x[1:],
+                                  self.stage * sign[:-1] * B[:-1] - size[:-1],
+                                  self.stage * sign[:-1] * D[:-1], slope_x[1:], size[:-1]],
+                                 axis=-1)
+        self.forward = np.stack([slope_x[:-1], slope_y[:-1], slope_x[:-1],
+                                 -(size[1:] + self.stage * sign[1:] * B[1:]),
+                                 -self.stage * sign[1:] * D[1:], slope_x[:-1], size[1:]],
+                                axis=-1)
+
+    def speeds(self, sag_v=None, start_speed: float = 0.0) -> np.ndarray:
+        """The fastest path speeds ṡ (n,) from ``start_speed`` to rest with the bus
+        ``sag_v`` (n,) below its nominal voltage (None: none); NaN where the start speed is
+        out of reach."""
+        W = self.W
+        if sag_v is not None:
+            W = W.copy()
+            rows = self.voltage_rows
+            W[:, :rows] = np.maximum(W[:, :rows] - np.asarray(sag_v, float)[:, None],
+                                     self.least)
+        j, m, size_m, size_j, alpha, beta, constant = self.pairs
+        top = np.minimum(self.top, np.min(first_positive_root(
+            alpha, beta, W[:, j] * size_m + W[:, m] * size_j + constant), axis=-1))
+        low, high = W + self.sign_c, W - self.sign_c
+        self.backward[..., 2] = np.where(self.bounded, -low * self.inverse, -np.inf)[1:]
+        self.backward[..., 5] = self.stage * low[:-1]
+        self.forward[..., 2] = np.where(self.bounded, high * self.inverse, np.inf)[:-1]
+        self.forward[..., 5] = self.stage * high[1:]
+        speed, ceiling = _passes_one_path(self.backward.tolist(), self.forward.tolist(),
+                                          top.tolist(), self.twice, float(start_speed))
+        if start_speed > ceiling[0] * (1.0 + 1e-9) + 1e-12:
+            return np.full(len(speed), np.nan)
+        return np.array(speed)
+
+
 def _passes_one_path(backward, forward, top, twice, start_speed):
     """``fastest_speeds``' backward and forward passes for one path, on floats. Per stage and
     row: the s̈ bound's slopes in x and y and its constant (braking at the stage's end for

@@ -7,6 +7,7 @@ the arm's direction of motion into the first segment. A shape Σₕ aₕ·sin(h�
 whole path (``shaping``). The timing grid clusters its stages toward both ends.
 """
 
+import copy
 import math
 
 import numpy as np
@@ -17,10 +18,13 @@ from arm_control.model.world import ForbiddenSpace
 # Corners that turn by more than this (a near reversal) always stop rather than blend.
 MAX_BLEND_TURN_RAD = math.radians(175.0)
 _MAX_BLEND_HALVINGS = 6
-# Timing grids: about one stage per this much path length (rad), within [least, most] stages;
-# TOPP-RA (moving starts) on the coarser one, the exact timing from rest on the finer.
-COARSE_GRID = (0.01, 40, 240)
-FINE_GRID = (0.0075, 60, 260)
+# Timing grids: about one stage per this much path length (rad), within [least, most] stages,
+# and each blend of radius r cut in stages of r/(this last number); a moving start on the
+# coarser one, the exact timing from rest on the finer.
+COARSE_GRID = (0.01, 40, 240, 16)
+FINE_GRID = (0.0075, 60, 260, 16)
+# ... and a quick timing (the arm starts on it while the fine one is found) on this one.
+QUICK_GRID = (0.05, 32, 48, 4)
 
 
 def _ramp(t, r, order):
@@ -65,12 +69,15 @@ class BlendedPath:
            + Σₕ aₕ·sin(hπσ/L),
     with uₖ the unit direction of segment k and σₖ the length up to corner k, L the length;
     the last sum (``shape``: rows aₕ = [shoulder, elbow] amplitudes, rad) bends the whole
-    path, e.g. folding the elbow on the way (see ``_reshape``). Exactly the polyline outside
-    the blends when unshaped; it always starts and ends at the first and last points.
-    TOPP-RA takes it as its path as it is (``__call__``, ``dof``, ``path_interval``).
+    path, e.g. folding the elbow on the way (``shaping``); with ``flat_start`` (a path the
+    arm enters moving) each sine less hπσ/L·(1 − σ/L)^6, so that the bend leaves the initial
+    direction alone. Exactly the polyline outside the blends when unshaped; it always starts
+    and ends at the first and last points. TOPP-RA takes it as its path as it is
+    (``__call__``, ``dof``, ``path_interval``).
     """
 
-    def __init__(self, points, radii, start_direction=None, start_radius=0.0, shape=None):
+    def __init__(self, points, radii, start_direction=None, start_radius=0.0, shape=None,
+                 flat_start=False):
         points = np.asarray(points, dtype=float)
         steps = np.diff(points, axis=0)
         self.lengths = np.linalg.norm(steps, axis=1)
@@ -85,13 +92,21 @@ class BlendedPath:
                      else np.asarray(start_direction, float) - self.directions[0])
         self.length = float(self.knots[-1])
         self.shape = np.zeros((0, 2)) if shape is None else np.asarray(shape, float).reshape(-1, 2)
+        self.flat_start = bool(flat_start)
+
+    def with_shape(self, shape) -> 'BlendedPath':
+        """The same path bent by ``shape`` instead (amplitudes (H, 2), rad)."""
+        bent = copy.copy(self)
+        bent.shape = np.asarray(shape, float).reshape(-1, 2)
+        return bent
 
     @property
     def speed_bound(self) -> float:
         """An upper bound of |q'(σ)|: 1 on the polyline, more with the start bend and shape."""
         harmonics = np.arange(1, len(self.shape) + 1) * math.pi / self.length
+        flat = 2.0 if self.flat_start else 1.0        # the flattening term's slope ≤ hπ/L
         return (1.0 + 1.2 * float(np.linalg.norm(self.bend))
-                + float(np.sum(np.linalg.norm(self.shape, axis=1) * harmonics)))
+                + flat * float(np.sum(np.linalg.norm(self.shape, axis=1) * harmonics)))
 
     @property
     def dof(self) -> int:
@@ -131,12 +146,19 @@ class BlendedPath:
             if np.any(near):
                 q[near] += _start_bend(s[near], self.start_radius, order)[:, None] * self.bend
         if len(self.shape):
-            q += shape_terms(s / self.length, self.shape, order) / self.length ** order
+            q += shape_terms(s / self.length, self.shape, order,
+                             self.flat_start) / self.length ** order
         return q[0] if np.ndim(path_positions) == 0 else q
 
 
-def shape_terms(fraction, shape, order):
-    """Σₕ aₕ·dᵒ/dfᵒ sin(hπf) at path fractions f (n,) for amplitudes (..., H, 2): (..., n, 2)."""
+# The power of (1 − f) in the flattening term of a moving start's shape.
+_FLAT_POWER = 6
+
+
+def shape_terms(fraction, shape, order, flat=False):
+    """Σₕ aₕ·dᵒ/dfᵒ bₕ(f) at path fractions f (n,) for amplitudes (..., H, 2): (..., n, 2),
+    bₕ(f) = sin(hπf), less hπ·f·(1 − f)^N with ``flat`` (then bₕ'(0) = 0: bₕ(0) = bₕ(1) = 0
+    either way)."""
     harmonics = np.arange(1, shape.shape[-2] + 1) * math.pi        # hπ
     phase = np.multiply.outer(fraction, harmonics)                  # (n, H)
     if order == 0:
@@ -145,6 +167,16 @@ def shape_terms(fraction, shape, order):
         basis = harmonics * np.cos(phase)
     else:
         basis = -harmonics ** 2 * np.sin(phase)
+    if flat:
+        f, n = np.asarray(fraction, float)[:, None], _FLAT_POWER
+        rest = 1.0 - f
+        if order == 0:
+            ramp = f * rest ** n
+        elif order == 1:
+            ramp = rest ** n - n * f * rest ** (n - 1)
+        else:
+            ramp = -2 * n * rest ** (n - 1) + n * (n - 1) * f * rest ** (n - 2)
+        basis = basis - harmonics * ramp
     return basis @ shape
 
 
@@ -259,9 +291,9 @@ def clustered(length: float, stages: int) -> np.ndarray:
 
 def grid_for(path: BlendedPath, stages=COARSE_GRID) -> np.ndarray:
     """Stages clustered toward both ends (``clustered``), finer inside the blends (where q''
-    changes fast); ``stages``: (step, least, most), e.g. ``FINE_GRID``."""
+    changes fast); ``stages``: (step, least, most, per radius), e.g. ``FINE_GRID``."""
     length = path.length
-    step, least, most = stages
+    step, least, most, per_radius = stages
     stages = int(min(most, max(least, math.ceil(length / step))))
     grid = [clustered(length, stages)]
     step = length / stages
@@ -269,7 +301,7 @@ def grid_for(path: BlendedPath, stages=COARSE_GRID) -> np.ndarray:
     if path.start_radius > 0.0:
         bends.append((0.0, path.start_radius))
     for centre, r in bends:
-        spacing = min(step, r / 16)
+        spacing = min(step, r / per_radius)
         if spacing < step:
             grid.append(np.arange(max(centre - r, 0.0), min(centre + r, length), spacing))
     grid = np.unique(np.concatenate(grid))

@@ -26,7 +26,7 @@ from arm_control.model.dynamics import ArmDynamics, COULOMB_SMOOTHING_RAD_S
 
 # A window never narrower than this (V) in the rows: a bus sagging to nothing is refused by
 # the final check, not divided by.
-_LEAST_HALF_WIDTH_V = 1e-3
+LEAST_HALF_WIDTH_V = 1e-3
 
 
 class PathTerms:
@@ -66,13 +66,15 @@ class PathTerms:
 
 
 def rows(terms: PathTerms, limits: TrajectoryLimits, sag_v=0.0, margin_v=0.0,
-         coulomb_speed=None):
+         coulomb_speed=None, per_point=False):
     """The rows (A, B, C, D of shape (..., n, rows); W (rows,)) of every limit at once.
 
     ``sag_v`` (scalar or (..., n)): how far the bus sits below its nominal voltage;
     ``margin_v``: volts kept back from every voltage and current window besides the
     reserves (the final check's tightening); ``coulomb_speed``: the speeds at which
-    Coulomb friction is taken (None: at speed, c·sign(q')).
+    Coulomb friction is taken (None: at speed, c·sign(q')). ``per_point``: the two voltage
+    rows (the first two) left in volts, W then (..., n, rows) with their half-widths as
+    they are, not held above the least (``exact.OnePath`` narrows them by a sag per point).
     """
     dq, ddq = terms.dq, terms.ddq
     friction = terms.coulomb(coulomb_speed)
@@ -80,18 +82,18 @@ def rows(terms: PathTerms, limits: TrajectoryLimits, sag_v=0.0, margin_v=0.0,
     driving, braking = limits.budget
     sag = np.asarray(sag_v, float)[..., None] + margin_v
     centre, half = window(dq, driving - sag, braking - sag)
-    half = np.maximum(half, _LEAST_HALF_WIDTH_V)
-    A, B = [terms.a / half], [terms.b / half]
-    C, D = [(torque[2] - centre) / half], [(terms.d + terms.emf) / half]
-    W = [1.0, 1.0]
+    scale = 1.0 if per_point else np.maximum(half, LEAST_HALF_WIDTH_V)
+    A, B = [terms.a / scale], [terms.b / scale]
+    C, D = [(torque[2] - centre) / scale], [(terms.d + terms.emf) / scale]
+    W = [half if per_point else np.ones(2)]
     for j, (drive, brake) in enumerate(limits.current_budget_v):
         if np.isfinite(drive):
             centre_j, half_j = window(dq[..., j], drive - margin_v, brake - margin_v)
-            half_j = np.maximum(half_j, _LEAST_HALF_WIDTH_V)[..., None]
+            half_j = np.maximum(half_j, LEAST_HALF_WIDTH_V)[..., None]
             for out, term in zip((A, B, C, D), torque):
                 out.append(term[..., j:j + 1] / half_j)
             C[-1] = C[-1] - centre_j[..., None] / half_j
-            W.append(1.0)
+            W.append(np.ones(1))
     total = limits.supply_current_a()
     if np.isfinite(total):
         amps = np.array([m.count / m.resistance_ohm for m in limits.supply.motors]) / total
@@ -99,16 +101,21 @@ def rows(terms: PathTerms, limits: TrajectoryLimits, sag_v=0.0, margin_v=0.0,
             weights = amps * sides
             for out, term in zip((A, B, C, D), torque):
                 out.append(np.sum(term * weights, axis=-1, keepdims=True))
-            W.append(1.0)
+            W.append(np.ones(1))
     for j, cap in enumerate(limits.max_acceleration_rad_s2):
         if np.isfinite(cap):
             A.append(dq[..., j:j + 1])
             B.append(ddq[..., j:j + 1])
             C.append(np.zeros_like(dq[..., j:j + 1]))
             D.append(np.zeros_like(dq[..., j:j + 1]))
-            W.append(float(cap))
-    return (np.concatenate(A, axis=-1), np.concatenate(B, axis=-1),
-            np.concatenate(C, axis=-1), np.concatenate(D, axis=-1), np.array(W))
+            W.append(np.full(1, float(cap)))
+    A, B, C, D = (np.concatenate(v, axis=-1) for v in (A, B, C, D))
+    if per_point:
+        W = np.concatenate([np.broadcast_to(w, A.shape[:-1] + w.shape[-1:]) for w in W],
+                           axis=-1)
+    else:
+        W = np.concatenate(W)
+    return A, B, C, D, W
 
 
 def speed_caps(limits: TrajectoryLimits, dq) -> np.ndarray:

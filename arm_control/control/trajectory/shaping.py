@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from arm_control.config import ArmConfig
-from arm_control.control.trajectory.bus import under_the_bus
+from arm_control.control.trajectory.bus import exact_timing, under_the_bus
 from arm_control.control.trajectory.exact import durations, fastest_speeds
 from arm_control.control.trajectory.limits import TrajectoryLimits
 from arm_control.control.trajectory.path import (BlendedPath, clustered, forbidden_at,
@@ -49,15 +49,16 @@ def _with_room(arm: ArmConfig) -> ForbiddenSpace:
     return ForbiddenSpace(dataclasses.replace(arm, world=world))
 
 
-def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: TrajectoryLimits):
-    """(amplitudes (H, 2) of the bend Σₕ aₕ·sin(hπσ/L) that make the path fastest, or
-    zeros; the (σ, sag) of the unbent path's bus, or None).
+def best_shape(base: BlendedPath, dynamics: ArmDynamics, forbidden, limits: TrajectoryLimits,
+               start_speed: float = 0.0, steps=_STEPS):
+    """(amplitudes (H, 2) of the bend Σₕ aₕ·bₕ(σ/L) that make ``base`` fastest from
+    ``start_speed`` (a moving start's path is ``flat_start``), or zeros; the (σ, sag) of the
+    unbent path's bus, or None; the duration the search found, inf when it found none).
 
-    A grid of the first harmonic's amplitudes, then ``_STEPS`` refinements over every
+    A grid of the first harmonic's amplitudes, then ``steps`` refinements over every
     combination of ±step; each batch timed at once.
     """
     zeros = np.zeros((_HARMONICS, 2))
-    base = BlendedPath(points, radii)
     length = base.length
     grid = clustered(length, SEARCH_STAGES)
     fraction = grid / length
@@ -66,28 +67,25 @@ def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: Trajecto
 
     def timed(terms, sag_v):
         A, B, C, D, W = rows(terms, limits, sag_v)
-        return fastest_speeds(A, B, C, D, W, speed_caps(limits, terms.dq), steps)
+        return fastest_speeds(A, B, C, D, W, speed_caps(limits, terms.dq), steps, start_speed)
 
-    one = PathTerms(dynamics, q0[None], dq0[None], ddq0[None])
-
-    def unshaped(sag_v):
-        speed = timed(one, sag_v)[0]
-        return speed ** 2 if np.all(np.isfinite(speed)) else None
-
-    x, sag = under_the_bus(unshaped, PathTerms(dynamics, q0, dq0, ddq0), limits, grid)
+    terms = PathTerms(dynamics, q0, dq0, ddq0)
+    x, sag = under_the_bus(exact_timing(terms, grid, limits, 0.0, start_speed), terms, limits,
+                           grid)
     if x is None:
-        return zeros, None
+        return zeros, None, math.inf
     bus = None if limits.supply is None else (grid, sag)
     unshaped_s = float(durations(steps, np.sqrt(x)[None])[0])
     if not unshaped_s >= _MIN_DURATION_S:
-        return zeros, bus                          # a hop: the search would cost more
+        return zeros, bus, unshaped_s              # a hop: the search would cost more
     roomy = _with_room(forbidden.arm)
     base_roomy = np.asarray(roomy.is_free(q0), dtype=bool)
+    flat = base.flat_start
 
     def search(shapes):
-        q = q0 + shape_terms(fraction, shapes, 0)
-        dq = dq0 + shape_terms(fraction, shapes, 1) / length
-        ddq = ddq0 + shape_terms(fraction, shapes, 2) / length ** 2
+        q = q0 + shape_terms(fraction, shapes, 0, flat)
+        dq = dq0 + shape_terms(fraction, shapes, 1, flat) / length
+        ddq = ddq0 + shape_terms(fraction, shapes, 2, flat) / length ** 2
         # Free with room where the planner's path has room, free elsewhere (room ⇒ free).
         ok = np.asarray(roomy.is_free(q.reshape(-1, 2)), dtype=bool).reshape(q.shape[:2])
         tight = ~ok & ~base_roomy
@@ -110,24 +108,23 @@ def best_shape(points, radii, dynamics: ArmDynamics, forbidden, limits: Trajecto
     every = np.array(list(itertools.product((-1.0, 0.0, 1.0), repeat=2 * _HARMONICS)))
     every = every.reshape(-1, _HARMONICS, 2)
     axes = every[np.sum(np.abs(every), axis=(1, 2)) <= 1.0]
-    for index, step in enumerate(_STEPS):
+    for index, step in enumerate(steps):
         offsets = every if index < _FULL_STEPS else axes
         batch = best + offsets * step * length
         times = search(batch)
         if np.min(times) < best_s:
             best, best_s = batch[int(np.argmin(times))], float(np.min(times))
     if not math.isfinite(best_s) or best_s >= unshaped_s * (1.0 - _MIN_GAIN):
-        return zeros, bus
-    return best, bus
+        return zeros, bus, unshaped_s
+    return best, bus, best_s
 
 
-def free_shape(points, radii, shape, forbidden, step_rad):
+def free_shape(base: BlendedPath, shape, forbidden, step_rad):
     """``shape``, or the largest of its halves, quarters, ... whose path is free at
     ``step_rad`` (the search saw only coarse samples); None when none is."""
     for scale in (1.0, 0.5, 0.25):
         if not np.any(shape):
             break
-        path = BlendedPath(points, radii, shape=scale * shape)
-        if len(forbidden_at(path, forbidden, step_rad)) == 0:
+        if len(forbidden_at(base.with_shape(scale * shape), forbidden, step_rad)) == 0:
             return scale * shape
     return None

@@ -85,6 +85,14 @@ class Trajectory:
                 q[mine], qd[mine], qdd[mine] = piece.sample(times[mine] - self._offsets[i])
         return q, qd, qdd
 
+    def path_at(self, t_s: float):
+        """(the path, path position σ) the trajectory is on at ``t_s``, when it has one piece
+        (a path with a stop has several: None)."""
+        if len(self._pieces) != 1 or not 0.0 <= t_s < self.duration_s:
+            return None
+        piece = self._pieces[0]
+        return piece.path, float(piece.state(t_s)[0][0])
+
     def check_times(self) -> np.ndarray:
         """Every grid time and stage midpoint: where the constraints were imposed and between."""
         times = []

@@ -1,13 +1,15 @@
 """Timing one piece of path, and the final check of a whole trajectory with the exact model.
 
-A piece from rest is timed exactly (``exact.fastest_speeds``), a moving start by TOPP-RA
-(``moving_start``), both under the bus their own draw leaves (``bus``). The trajectory is
-then checked on dense samples with the exact model: ``ArmDynamics.voltages`` for the volts,
-``PowerSupply.bus_voltages`` for the bus they leave (what ``PowerSupply.solve`` gives when
-it lowers nothing, which is what passing the check means), every voltage within its bus less
-the reserves, every current within its limit less the reserves, the bus above the brownout
-voltage, the speed and acceleration caps kept. If the check fails, every window is narrowed
-by the excess and the pieces timed again; as a last resort time is stretched until it passes.
+A piece is timed exactly (``exact.fastest_speeds``) from rest or from its start speed, a
+moving start the exact passes cannot take (its start speed past their first stage's reach)
+by TOPP-RA (``moving_start``), both under the bus their own draw leaves (``bus``). The
+trajectory is then checked on dense samples with the exact model: ``ArmDynamics.voltages``
+for the volts, ``PowerSupply.bus_voltages`` for the bus they leave (what
+``PowerSupply.solve`` gives when it lowers nothing, which is what passing the check means),
+every voltage within its bus less the reserves, every current within its limit less the
+reserves, the bus above the brownout voltage, the speed and acceleration caps kept. If the
+check fails, every window is narrowed by the excess and the pieces timed again; as a last
+resort time is stretched until it passes.
 """
 
 import dataclasses
@@ -16,7 +18,8 @@ import math
 import numpy as np
 
 from arm_control.control.trajectory.bus import (bus_profile, exact_timing,
-                                                FINE_BUS_ITERATIONS, under_the_bus)
+                                                FINE_BUS_ITERATIONS, QUICK_AFTER_FIT,
+                                                under_the_bus)
 from arm_control.control.trajectory.limits import TrajectoryError, TrajectoryLimits
 from arm_control.control.trajectory.moving_start import time_moving
 from arm_control.control.trajectory.rows import PathTerms
@@ -29,13 +32,15 @@ LIMIT_TOLERANCE = 1.02             # ratio of the speed/acceleration caps it acc
 
 @dataclasses.dataclass
 class TimedPiece:
-    """A piece of path, its grid and the arm's terms along it, and its profile x = ṡ²."""
+    """A piece of path, its grid and the arm's terms along it, and its profile x = ṡ²;
+    ``coarse``: its bus is found on its own grid, with no finer pass (a quick timing)."""
 
     path: object
     grid: np.ndarray
     terms: PathTerms
     x: np.ndarray
     bus: tuple = None           # the (σ, sag) the timing assumed
+    coarse: bool = False
 
     @property
     def start_speed(self) -> float:
@@ -43,16 +48,23 @@ class TimedPiece:
 
 
 def time_from_rest(path, grid, terms: PathTerms, limits: TrajectoryLimits,
-                   margin_v: float = 0.0, bus_hint=None):
-    """(x = ṡ² of the fastest rest-to-rest timing under the bus it leaves, back-EMF exact,
-    or None when the path cannot be followed; the (σ, sag) it assumed).
+                   margin_v: float = 0.0, bus_hint=None, start_speed: float = 0.0,
+                   coarse: bool = False):
+    """(x = ṡ² of the fastest timing from ``start_speed`` to rest under the bus it leaves,
+    back-EMF exact, or None when the path cannot be followed from there; the (σ, sag) it
+    assumed).
 
     The bus is found on a coarse grid first (``bus.bus_profile``, from ``bus_hint``, the
-    (σ, sag) of a like path), then only raised where it falls short on the fine one."""
-    solve = exact_timing(terms, grid, limits, margin_v)
+    (σ, sag) of a like path), then only raised where it falls short on the fine one;
+    ``coarse``: found on ``grid`` itself, from the hint (a quick timing on few stages)."""
+    solve = exact_timing(terms, grid, limits, margin_v, start_speed)
     if limits.supply is None:
         return solve(0.0), None
-    sigma, sag = bus_profile(path, terms.dynamics, limits, margin_v, 0.0, bus_hint)
+    if coarse:
+        start = None if bus_hint is None else np.interp(grid, *bus_hint)
+        x, sag = under_the_bus(solve, terms, limits, grid, start, after_fit=QUICK_AFTER_FIT)
+        return x, (grid, sag)
+    sigma, sag = bus_profile(path, terms.dynamics, limits, margin_v, start_speed, bus_hint)
     x, fine = under_the_bus(solve, terms, limits, grid, np.interp(grid, sigma, sag),
                             FINE_BUS_ITERATIONS, relax=0.0, give_up=True)
     if x is None:
@@ -66,12 +78,12 @@ def time_from_rest(path, grid, terms: PathTerms, limits: TrajectoryLimits,
 
 
 def time_piece(path, grid, terms, limits, start_speed, margin_v=0.0, guess=None,
-               bus_hint=None):
-    """(x, controllable start x, bus (σ, sag)): from rest exactly, else by TOPP-RA; x None
-    when there is none."""
-    if start_speed == 0.0:
-        x, bus = time_from_rest(path, grid, terms, limits, margin_v, bus_hint)
-        return x, 0.0, bus
+               bus_hint=None, coarse=False):
+    """(x, controllable start x, bus (σ, sag)): exactly, and for a moving start the exact
+    timing failing, by TOPP-RA; x None when there is none."""
+    x, bus = time_from_rest(path, grid, terms, limits, margin_v, bus_hint, start_speed, coarse)
+    if x is not None or start_speed == 0.0:
+        return x, start_speed ** 2, bus
     x, reachable = time_moving(path, grid, terms, limits, start_speed, margin_v, guess,
                                bus_hint)
     return x, reachable, None
@@ -158,7 +170,8 @@ def verified(pieces, start, end, dynamics: ArmDynamics,
         retimed = []
         for piece in pieces:
             x, _, bus = time_piece(piece.path, piece.grid, piece.terms, solve_limits,
-                                   piece.start_speed, margin_v, piece.x, piece.bus)
+                                   piece.start_speed, margin_v, piece.x, piece.bus,
+                                   piece.coarse)
             retimed.append(piece if x is None else dataclasses.replace(piece, x=x, bus=bus))
         pieces = retimed
         trajectory = assemble(pieces, start, end)

@@ -1,0 +1,239 @@
+"""A goal starts on a quick trajectory and hands over to its refinement.
+
+The quick one must be as sound as any (free at the world's check step, within every limit by
+the exact electrical model, at rest at both ends) and close to the fine timing; the
+refinement takes over with the same position and velocity and never makes the move slower;
+the goal runner lets it take over only while that is still ahead and the motion it refines
+is still the plan; through the worker the quick answer comes first, then the refinement.
+"""
+
+import math
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from arm_control import config
+from arm_control.control.closed_loop import ClosedLoop
+from arm_control.control.plans import PlanRequest, PlanTimer
+from arm_control.control.trajectory import (refined_trajectory, time_optimal_trajectory,
+                                            TrajectoryLimits)
+from arm_control.control.trajectory.bus import exact_timing
+from arm_control.control.trajectory.exact import fastest_speeds
+from arm_control.control.trajectory.path import BlendedPath, FINE_GRID, grid_for
+from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
+from arm_control.control.trajectory.timing import check
+from arm_control.model.dynamics import ArmDynamics
+from arm_control.model.world import ForbiddenSpace
+from arm_control.nodes.plan_worker import PlanWorker
+from arm_control.planning.planner import Planner
+
+STEP_RAD = 0.001745
+PATHS = {
+    'up to the front': [(1.5708, -1.5708), (0.3, 0.5)],
+    'front over the top to the back': [(0.3, 0.5), (1.5708, 0.0), (2.8, -0.5)],
+    'short hop': [(1.0, -1.0), (1.1, -0.9)],
+    'floor to the far back': [(0.18, -0.05), (2.9, 0.15)],
+}
+
+
+@pytest.fixture(scope='module')
+def setup():
+    arm, controller = config.load('controller')
+    return (arm, ArmDynamics(arm), ForbiddenSpace(arm),
+            TrajectoryLimits.from_config(arm, controller))
+
+
+def assert_sound(trajectory, start, end, dynamics, forbidden, limits):
+    """At rest on ``start`` and ``end`` (or moving at the start of a refinement), free at the
+    check step, within every limit by the exact model."""
+    q, _, _ = trajectory.sample_many(np.linspace(0.0, trajectory.duration_s, 5000))
+    assert np.all(forbidden.is_free(q))
+    np.testing.assert_allclose(trajectory.sample(0.0)[0], start, atol=1e-9)
+    final = trajectory.sample(trajectory.duration_s)
+    np.testing.assert_allclose(final[0], end, atol=1e-9)
+    np.testing.assert_allclose(final[1], 0.0, atol=1e-9)
+    steps = np.max(np.abs(np.diff(q, axis=0)))
+    assert steps < STEP_RAD                       # the samples above are that dense
+    assert check(trajectory, dynamics, limits).passes
+
+
+def test_one_path_timing_equals_the_timing_of_its_rows_at_any_sag(setup):
+    """The bus iteration's fast solver (rows worked out once) gives the speeds the plain
+    solver gives with the rows at that sag, from rest or moving, with a margin or not."""
+    arm, dynamics, _, limits = setup
+    path = BlendedPath(np.array(PATHS['front over the top to the back']), [0.4])
+    grid = grid_for(path, FINE_GRID)
+    terms = PathTerms.along(dynamics, path, grid)
+    rng = np.random.default_rng(5)
+    for margin, start_speed in ((0.0, 0.0), (0.4, 0.0), (0.0, 0.8)):
+        solve = exact_timing(terms, grid, limits, margin, start_speed)
+        for sag in (np.zeros(len(grid)), rng.uniform(0.0, 4.0, len(grid))):
+            A, B, C, D, W = rows(terms, limits, sag, margin)
+            plain = fastest_speeds(A[None], B[None], C[None], D[None], W,
+                                   speed_caps(limits, terms.dq)[None], np.diff(grid),
+                                   start_speed)[0]
+            np.testing.assert_allclose(np.sqrt(solve(sag)), plain, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize('name', sorted(PATHS))
+def test_the_quick_trajectory_is_sound_and_near_the_fine_timing(setup, name):
+    arm, dynamics, forbidden, limits = setup
+    waypoints = np.array(PATHS[name])
+    quick = time_optimal_trajectory(waypoints, dynamics, forbidden, limits, quick=True)
+    fine = time_optimal_trajectory(waypoints, dynamics, forbidden, limits, reshape=False)
+    assert_sound(quick, waypoints[0], waypoints[-1], dynamics, forbidden, limits)
+    assert quick.duration_s <= 1.03 * fine.duration_s
+
+
+@pytest.mark.parametrize('name', ['up to the front', 'front over the top to the back',
+                                  'floor to the far back'])
+def test_the_refinement_takes_over_seamlessly_and_never_slows_the_move(setup, name):
+    arm, dynamics, forbidden, limits = setup
+    waypoints = np.array(PATHS[name])
+    quick = time_optimal_trajectory(waypoints, dynamics, forbidden, limits, quick=True)
+    handover = 0.08
+    refined = refined_trajectory(quick, handover, dynamics, forbidden, limits)
+    assert refined is not None
+    q, qd, _ = quick.sample(handover)
+    np.testing.assert_allclose(refined.sample(0.0)[0], q, atol=1e-9)
+    np.testing.assert_allclose(refined.sample(0.0)[1], qd, atol=1e-9)
+    assert handover + refined.duration_s < quick.duration_s
+    assert_sound(refined, q, waypoints[-1], dynamics, forbidden, limits)
+
+
+def test_no_refinement_past_the_end_of_the_quick_trajectory(setup):
+    arm, dynamics, forbidden, limits = setup
+    waypoints = np.array(PATHS['short hop'])
+    quick = time_optimal_trajectory(waypoints, dynamics, forbidden, limits, quick=True)
+    assert refined_trajectory(quick, quick.duration_s, dynamics, forbidden, limits) is None
+    assert refined_trajectory(quick, 2.0 * quick.duration_s, dynamics, forbidden,
+                              limits) is None
+
+
+# --- the goal runner -------------------------------------------------------------------------
+
+@pytest.fixture(scope='module')
+def planner(arm):
+    return Planner(arm, config.load('planner')[1])
+
+
+def started_goal(arm, planner, preset='back_score'):
+    """A closed loop whose core took a quick plan to ``preset``: (loop, quick, its motion)."""
+    loop = ClosedLoop(arm, config.load('controller')[1])
+    loop.step()
+    loop.core.submit_preset(loop.now, preset)
+    loop.step()
+    (request,) = loop.core.take_plan_requests()
+    timer = loop.core.plan_timer
+    plan = timer.ranking.plan(planner, request.start_q, request.goal.xy)
+    quick = timer.time_plan(request, plan, quick=True)
+    loop.core.on_timed_plan(loop.now, quick)
+    return loop, quick, loop.core.setpoints.timeline.last
+
+
+def test_a_refinement_in_time_takes_over_at_its_hand_over(arm, planner):
+    loop, quick, motion = started_goal(arm, planner)
+    handover = 0.1
+    refined = loop.core.plan_timer.refine(quick, handover)
+    assert refined is not None and refined.handover_s == handover
+    loop.core.on_timed_plan(loop.now, refined)
+    setpoints = loop.core.setpoints
+    switch = motion.begin_s + handover
+    for t in (switch - 0.05, switch - 1e-4):
+        np.testing.assert_allclose(setpoints.sample(t)[0],
+                                   quick.trajectory.sample(t - motion.begin_s)[0])
+    for t in (switch, switch + 0.2):
+        np.testing.assert_allclose(setpoints.sample(t)[0],
+                                   refined.trajectory.sample(t - switch)[0])
+    assert loop.core.goals.latency_s['trajectory'] == pytest.approx(
+        handover + refined.trajectory.duration_s)
+    assert loop.run(5.0, lambda: loop.core.goals.counts['reached'] == 1)
+    assert loop.lowest_m == 0.0
+
+
+def test_a_late_refinement_is_ignored(arm, planner):
+    loop, quick, motion = started_goal(arm, planner)
+    refined = loop.core.plan_timer.refine(quick, 0.1)
+    loop.core.on_timed_plan(motion.begin_s + 0.1, refined)
+    later = motion.begin_s + 0.3
+    np.testing.assert_allclose(loop.core.setpoints.sample(later)[0],
+                               quick.trajectory.sample(later - motion.begin_s)[0])
+
+
+def test_a_refinement_of_a_motion_a_new_goal_took_over_from_is_ignored(arm, planner):
+    loop, quick, motion = started_goal(arm, planner)
+    refined = loop.core.plan_timer.refine(quick, 0.2)
+    loop.run(0.04)
+    loop.core.submit_preset(loop.now, 'stow')            # preempts: plans from the quick one
+    loop.core.on_timed_plan(loop.now, refined)
+    t = motion.begin_s + 0.25
+    np.testing.assert_allclose(loop.core.setpoints.sample(t)[0],
+                               quick.trajectory.sample(t - motion.begin_s)[0])
+
+
+# --- the worker -----------------------------------------------------------------------------
+
+def wait_for(condition, event, timeout_s=10.0) -> bool:
+    """Wait (on ``event``, set by each answer) until ``condition`` holds, or the timeout."""
+    deadline = time.monotonic() + timeout_s
+    while not condition() and time.monotonic() < deadline:
+        event.wait(0.05)
+        event.clear()
+    return condition()
+
+
+def test_the_worker_answers_a_goal_from_rest_twice_and_a_moving_start_once(arm, planner):
+    controller = config.load('controller')[1]
+    answers, arrived = [], threading.Event()
+
+    def on_timed(timed):
+        answers.append(timed)
+        arrived.set()
+
+    worker = PlanWorker(arm, controller, on_timed)
+    try:
+        assert worker.ready.wait(30.0)
+        timer = PlanTimer(arm, controller)
+        goal = timer.ranking.validator.check(-1.0, 1.0, 0.0, '', 'back').goal
+        start = (1.5708, -1.5708)
+        plan = timer.ranking.plan(planner, start, goal.xy)
+        worker.submit(PlanRequest(1, goal, start, (0.0, 0.0), None, 0.0), plan)
+        assert wait_for(lambda: len(answers) >= 2, arrived)
+        quick, refined = answers
+        assert quick.ok and math.isnan(quick.handover_s)
+        assert refined.ok and refined.handover_s > 0.0
+        assert refined.handover_s + refined.trajectory.duration_s < quick.trajectory.duration_s
+        worker.submit(PlanRequest(2, goal, start, (0.3, 0.2), 10.0, 9.9), plan)
+        assert wait_for(lambda: len(answers) >= 3, arrived)
+        assert not wait_for(lambda: len(answers) > 3, arrived, 1.0)    # and nothing more
+        moving = answers[2]
+        assert moving.request.request_id == 2 and moving.ok and math.isnan(moving.handover_s)
+    finally:
+        worker.close()
+
+
+# --- the branch choice ------------------------------------------------------------------------
+
+@pytest.mark.parametrize('start_xy, goal_xy', [((0.25, 0.45), (-1.0, 1.0)),
+                                               ((1.1, 0.9), (0.25, 0.45)),
+                                               ((1.2, 0.15), (0.9, 1.5))])
+def test_the_branch_chosen_is_the_one_the_fine_timing_finds_fastest(arm, planner, start_xy,
+                                                                    goal_xy):
+    """Chosen by time without timing finely: the elbow branch the planner answers with is the
+    one whose fine timing from rest (bent where faster) takes the least time."""
+    controller = config.load('controller')[1]
+    timer = PlanTimer(arm, controller)
+    validator = timer.ranking.validator
+    start = validator.free_configurations(*start_xy)[-1]
+    goal = validator.check(*goal_xy, 0.0, '', 'goal').goal
+    chosen = timer.ranking.plan(planner, start, goal_xy)
+    request = PlanRequest(1, goal, start, (0.0, 0.0), None, 0.0)
+    durations = {}
+    for q in validator.free_configurations(*goal_xy):
+        fine = timer.time_plan(request, planner.plan_to_configuration(start, q))
+        durations[q] = fine.trajectory.duration_s if fine.ok else math.inf
+    assert len(durations) == 2
+    fastest = min(durations, key=durations.get)
+    np.testing.assert_allclose(chosen.waypoints_rad[-1], fastest, atol=1e-9)
