@@ -116,11 +116,14 @@ class GoalRunner:
         self.machine.fire(T.GOAL)
         self.ask(now_s, goal, rest_q)
 
-    def ask(self, now_s: float, goal: Goal, rest_q, lead_s: float = PREEMPT_LEAD_S) -> None:
-        """A plan from where the setpoint will be ``lead_s`` ahead if it is still moving then
-        (the new motion takes over there), else from where it comes to rest. The motion the
-        new one starts from is no longer refined: the new plan starts where it will be."""
+    def ask(self, now_s: float, goal: Goal, rest_q, lead_s: Optional[float] = None) -> None:
+        """A plan from where the setpoint will be ``lead_s`` ahead (``PREEMPT_LEAD_S`` of
+        wall time) if it is still moving then (the new motion takes over there), else from
+        where it comes to rest. The motion the new one starts from is no longer refined: the
+        new plan starts where it will be."""
         self.refinable = None
+        if lead_s is None:
+            lead_s = PREEMPT_LEAD_S * self.plans.clock_rate
         start_time = now_s + lead_s
         timeline = self.setpoints.timeline
         if timeline.moving_at(start_time):

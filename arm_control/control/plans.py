@@ -55,6 +55,7 @@ class PlanRequest:
     start_time_s: Optional[float]
     sent_time_s: float
     lead_s: float = 0.1
+    clock_rate: float = 1.0          # the clock's seconds per wall second (sim time at 5x: 5)
 
 
 @dataclass(frozen=True)
@@ -243,10 +244,13 @@ class BranchRanking:
 
 class PlanHandoff:
     """The goal being planned: its request, when it must be answered, and what an answer
-    means for the arm."""
+    means for the arm. Planning takes wall time: with a clock ``clock_rate`` times faster
+    (the sim at 5x), the planner timeout and the lead of a plan from a moving start are as
+    many times longer on it."""
 
     def __init__(self, planner_timeout_s: float):
         self.planner_timeout_s = planner_timeout_s
+        self.clock_rate = 1.0
         self.pending: Optional[PlanRequest] = None
         self._outbox: list[PlanRequest] = []
         self._next_id = 1
@@ -255,13 +259,14 @@ class PlanHandoff:
 
     def start(self, now_s: float) -> None:
         """A goal becomes current: it must have a plan within the planner timeout."""
-        self.started_s, self.deadline_s = now_s, now_s + self.planner_timeout_s
+        self.started_s = now_s
+        self.deadline_s = now_s + self.planner_timeout_s * self.clock_rate
 
     def ask(self, now_s: float, goal: Goal, start_q, start_velocity_rad_s,
             start_time_s: Optional[float], lead_s: float) -> None:
         request = PlanRequest(self._next_id, goal, (float(start_q[0]), float(start_q[1])),
                               tuple(float(v) for v in start_velocity_rad_s), start_time_s,
-                              now_s, lead_s)
+                              now_s, lead_s, self.clock_rate)
         self._next_id += 1
         self.pending, self._outbox = request, [request]
 

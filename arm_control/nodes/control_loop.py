@@ -4,6 +4,7 @@ or busy process delays a command. A plan that becomes ready wakes it at once (``
 motion starts then, not at the next period, and the periods run on from there."""
 
 import threading
+import time
 
 from rclpy.clock import ClockType
 
@@ -11,22 +12,49 @@ from arm_control.nodes.realtime import raise_this_thread
 
 # With simulated time the clock only moves when /clock does: look this often (wall s).
 SIM_TIME_POLL_S = 0.001
+# The clock's rate is measured over this much wall time.
+RATE_WINDOW_S = 0.5
+
+
+class ClockRate:
+    """Seconds of the node's clock per wall second: 1 in real time, 5 with the sim at 5x.
+    Windows in which the clock stood still (a paused sim) leave it as it was."""
+
+    def __init__(self):
+        self.rate = 1.0
+        self._since = None                   # (clock s, wall s) at the window's start
+
+    def update(self, clock_s: float, wall_s: float) -> float:
+        if self._since is None:
+            self._since = (clock_s, wall_s)
+        clock0, wall0 = self._since
+        if wall_s - wall0 >= RATE_WINDOW_S:
+            if clock_s > clock0:
+                self.rate = (clock_s - clock0) / (wall_s - wall0)
+            self._since = (clock_s, wall_s)
+        return self.rate
 
 
 class ControlLoop:
     """Calls ``tick()`` every ``period_s`` of ``clock`` time, and at once when poked;
-    ``priority_problem`` says why the thread could not run at ``realtime_priority``."""
+    ``priority_problem`` says why the thread could not run at ``realtime_priority``;
+    ``clock_rate`` is the clock's seconds per wall second."""
 
     def __init__(self, clock, period_s: float, tick, realtime_priority: int = 0, warn=print):
         self.clock, self.period_s, self.tick = clock, period_s, tick
         self.realtime_priority, self.warn = realtime_priority, warn
         self.priority_problem = None
+        self.rate = ClockRate()
         self._wake = threading.Event()
         self._stopping = False
         self._thread = threading.Thread(target=self._run, daemon=True, name='control loop')
 
     def now_s(self) -> float:
         return self.clock.now().nanoseconds * 1e-9
+
+    @property
+    def clock_rate(self) -> float:
+        return self.rate.rate
 
     def start(self) -> None:
         self._thread.start()
@@ -51,6 +79,7 @@ class ControlLoop:
         due_s = self.now_s()
         while not self._stopping:
             now = self.now_s()
+            self.rate.update(now, time.monotonic())
             poked = self._wake.is_set()
             if poked or now >= due_s:
                 self._wake.clear()

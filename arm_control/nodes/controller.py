@@ -222,6 +222,7 @@ class ControllerNode(Node):
         began, now = time.perf_counter(), self.now_s()
         reading, self.reading = self.reading, None
         with self.lock:
+            self.core.goals.plans.clock_rate = self.loop.clock_rate
             try:
                 voltage = self.core.step(now, *(reading or (None, None)))
             except Exception as error:              # a bug must stop the arm, not the node

@@ -8,6 +8,7 @@ the worker's result thread. A broken or empty answer comes back at once, with th
 
 from dataclasses import replace
 import math
+import time
 
 from nav_msgs.srv import GetPlan
 
@@ -34,8 +35,9 @@ class PlanLink:
 
     def ready(self) -> bool:
         """Goals can be planned: the client reaches the planner and the worker is up. Calls
-        a restarted planner will never answer are forgotten after twice the timeout."""
-        now = self.now_s()
+        a restarted planner will never answer are forgotten after twice the timeout (wall
+        time: planning takes it, whatever the clock)."""
+        now = time.monotonic()
         for future, sent_s in list(self.calls.items()):
             if now - sent_s > 2.0 * self.planner_timeout_s:
                 self.client.remove_pending_request(future)
@@ -50,7 +52,7 @@ class PlanLink:
                                                   header)
             message.goal = messages.pose_stamped(*request.goal.xy, 0.0, header)
             future = self.client.call_async(message)
-            self.calls[future] = self.now_s()
+            self.calls[future] = time.monotonic()
             future.add_done_callback(lambda done, r=request: self._answered(r, done))
 
     def _timed(self, timed) -> None:

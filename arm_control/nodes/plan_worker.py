@@ -51,10 +51,10 @@ class HandoverClock:
     def __init__(self):
         self.ratio = FIRST_RATIO
 
-    def handover_s(self, quick_s: float, duration_s: float) -> float:
+    def handover_s(self, quick_s: float, duration_s: float, clock_rate: float = 1.0) -> float:
         """The hand-over for a quick timing that took ``quick_s`` (wall) and lasts
-        ``duration_s``."""
-        return min(max(MIN_HANDOVER_S, HANDOVER_SAFETY * self.ratio * quick_s),
+        ``duration_s`` (on a clock ``clock_rate`` times faster than the wall's)."""
+        return min(max(MIN_HANDOVER_S, HANDOVER_SAFETY * self.ratio * quick_s * clock_rate),
                    HANDOVER_SHARE * duration_s)
 
     def seen(self, quick_s: float, refine_s: float) -> None:
@@ -103,7 +103,8 @@ def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, 
         return
     began = time.perf_counter()
     try:
-        refined = timer.refine(timed, clock.handover_s(quick_s, timed.trajectory.duration_s))
+        refined = timer.refine(timed, clock.handover_s(quick_s, timed.trajectory.duration_s,
+                                                       request.clock_rate))
     except Exception:                       # the quick trajectory carries on
         refined = None
     clock.seen(quick_s, time.perf_counter() - began)
