@@ -45,6 +45,7 @@ from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.plan_link import PlanLink
 from arm_control.parameters import ParameterError
 
+PLANNER_POLL_S = 0.05             # how often to look whether the planner is there
 SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V command to arrive
 TUNABLE = ('shoulder_pid', 'elbow_pid', 'integrator_limit_v', 'feedback_voltage_reserve',
            'driving_voltage_reserve', 'goal_tolerance_rad', 'settled_velocity_rad_s',
@@ -66,8 +67,9 @@ class ControllerNode(Node):
         self.arm = ArmConfig.from_parameters(params)
         self.config = ControllerConfig.from_parameters(params)
         self.config.check_against(self.arm)
-        self.core = ArmController(self.arm, self.config)
         self.lock = threading.Lock()                # the core, between the threads
+        self.plans = PlanLink(self, self.arm, self.config, self.on_timed_plan)
+        self.core = ArmController(self.arm, self.config)
         # The latest reading for the loop, and the encoders and bus: (value, received at).
         self.reading = self.encoders = self.bus = None
         self.bad_inputs = self.bad_inputs_said = 0
@@ -97,10 +99,8 @@ class ControllerNode(Node):
         self.create_service(SetBool, '~/enable', lambda request, response: self.on_service(
             response, self.core.enable, bool(request.data)))
         self.outputs = self.create_guard_condition(self.publish_outputs)
-        self.plans = PlanLink(self, self.arm, self.config, self.core.kinematics,
-                              self.core.forbidden, self.on_timed_plan)
-        self.create_timer(0.2, lambda: self.command(self.core.on_planner_available,
-                                                    self.plans.ready()))
+        self.planner_ready = None
+        self.create_timer(PLANNER_POLL_S, self.watch_planner)
         self.create_timer(1.0, self.publish_diagnostics)
         priority = self.config.realtime_priority
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
@@ -211,6 +211,13 @@ class ControllerNode(Node):
         self.arm, self.config = arm, config
         self.outputs.trigger()
         return None
+
+    def watch_planner(self) -> None:
+        """Tell the core when the planner (and the timing worker) comes or goes."""
+        ready = self.plans.ready()
+        if ready != self.planner_ready:
+            self.planner_ready = ready
+            self.command(self.core.on_planner_available, ready)
 
     def warn_bad(self, message: str) -> None:
         self.bad_inputs += 1

@@ -13,16 +13,21 @@ import time
 from nav_msgs.srv import GetPlan
 
 from arm_control.control.plans import PathPlan, TimedPlan
+from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes import messages
 from arm_control.nodes.plan_worker import PlanWorker
 from arm_control.planning.planner import waypoints_from_poses
 
 
 class PlanLink:
-    """One node's planner client and timing worker."""
+    """One node's planner client and timing worker; made first thing at the node's start,
+    so that finding the planner and starting the worker go on while the rest is built."""
 
-    def __init__(self, node, arm, config, kinematics, forbidden, on_timed):
-        self.node, self.kinematics, self.forbidden = node, kinematics, forbidden
+    def __init__(self, node, arm, config, on_timed):
+        self.node = node
+        self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+        self.forbidden = ForbiddenSpace(arm)          # its joint limits, to unwrap angles
         self.planner_timeout_s = config.planner_timeout_s
         self.on_timed = on_timed
         self.client = node.create_client(GetPlan, 'plan_path')
