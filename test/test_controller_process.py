@@ -195,8 +195,9 @@ def test_frc_robot_every_move_planned_with_zero_contact(launch, probe, frc_robot
     positions = {name: (x, y) for name, x, y in frc_arm.presets}
     for name in names:
         send(*positions[name])                             # queued, visited in order
+    routine = ('goal_queued', 'sensors', 'planner_available')
     assert probe.spin_until(lambda: len(reached(events)) == len(names), 60.0), \
-        [e.data for e in events]
+        [e.data[:300] for e in events if not e.data.startswith(routine)]
     probe.spin_for(0.5)                                   # held at the last one
     presets.publish(String(data='shelf_pickup'))          # a button: replaces, goes now
     assert probe.spin_until(lambda: len(reached(events)) == len(names) + 1, 15.0)
