@@ -66,10 +66,15 @@ def test_plans_over_the_top_and_latches_the_path_and_the_map(launch, probe, frc)
     np.testing.assert_allclose(kinematics.forward(waypoints[-1]), goals['back_score'],
                                atol=1e-6)
     assert forbidden.path_is_free(waypoints, math.radians(0.1))
-    # the node's plan is the pure planner's
-    np.testing.assert_allclose(
-        poses, poses_from_waypoints(kinematics, pure.plan(high, goals['back_score'])
-                                    .waypoints_rad), atol=1e-9)
+    # The node's plan is as short as the pure planner's, to the same end. (Not the same
+    # path: with joint travel as the cost many paths tie, and which one the search meets
+    # first depends on the edges checked before, such as by the preset trees the node
+    # builds while idle.)
+    expected = pure.plan(high, goals['back_score']).waypoints_rad
+    np.testing.assert_allclose(np.abs(np.diff(waypoints, axis=0)).sum(),
+                               np.abs(np.diff(expected, axis=0)).sum(), atol=1e-5)
+    np.testing.assert_allclose(poses[-1], poses_from_waypoints(kinematics, expected)[-1],
+                               atol=1e-9)
 
     # Subscribers that arrive late still get the last plan and the map (transient local).
     paths = probe.collect(PathMsg, '/planned_path', LATCHED)
