@@ -184,7 +184,11 @@ def wait_for(condition, event, timeout_s=10.0) -> bool:
     return condition()
 
 
-def test_the_worker_answers_a_goal_from_rest_twice_and_a_moving_start_once(arm, planner):
+def test_the_worker_answers_a_goal_from_rest_at_once_then_refines_and_a_moving_start_once(
+        arm, planner):
+    """From rest: the quick trajectory at once, then at most one refinement, which ends
+    sooner. (It is left out when, from the hand-over the worker's clock sets, it would not:
+    on a loaded machine the hand-over comes late in the move.) A moving start: one answer."""
     controller = config.load('controller')[1]
     answers, arrived = [], threading.Event()
 
@@ -200,15 +204,20 @@ def test_the_worker_answers_a_goal_from_rest_twice_and_a_moving_start_once(arm, 
         start = (1.5708, -1.5708)
         plan = timer.ranking.plan(planner, start, goal.xy)
         worker.submit(PlanRequest(1, goal, start, (0.0, 0.0), None, 0.0), plan)
-        assert wait_for(lambda: len(answers) >= 2, arrived)
-        quick, refined = answers
+        assert wait_for(lambda: len(answers) >= 1, arrived, 30.0)
+        quick = answers[0]
         assert quick.ok and math.isnan(quick.handover_s)
-        assert refined.ok and refined.handover_s > 0.0
-        assert refined.handover_s + refined.trajectory.duration_s < quick.trajectory.duration_s
+        wait_for(lambda: len(answers) >= 2, arrived)
+        for refined in answers[1:]:
+            assert refined.ok and refined.handover_s > 0.0
+            assert refined.handover_s + refined.trajectory.duration_s \
+                < quick.trajectory.duration_s
+        assert len(answers) <= 2
+        before = len(answers)
         worker.submit(PlanRequest(2, goal, start, (0.3, 0.2), 10.0, 9.9), plan)
-        assert wait_for(lambda: len(answers) >= 3, arrived)
-        assert not wait_for(lambda: len(answers) > 3, arrived, 1.0)    # and nothing more
-        moving = answers[2]
+        assert wait_for(lambda: len(answers) > before, arrived, 30.0)
+        assert not wait_for(lambda: len(answers) > before + 1, arrived, 1.0)   # nothing more
+        moving = answers[before]
         assert moving.request.request_id == 2 and moving.ok and math.isnan(moving.handover_s)
     finally:
         worker.close()
