@@ -9,6 +9,7 @@ started it dies first.
 """
 
 import argparse
+import signal
 import subprocess
 import sys
 
@@ -35,6 +36,8 @@ def main():
     parser.add_argument('--count', type=int, default=2, help='busy processes')
     parser.add_argument('--seconds', type=float, default=60.0, help='how long they run (s)')
     args = parser.parse_args()
+    # Killed (SIGTERM), end the loops too: Python's default would leave them running.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     loops = start(args.count, args.seconds)
     try:
         for process in loops:
