@@ -1,7 +1,12 @@
 """The control loop's beat: ``tick`` once per period on the node's clock, in a thread of its
 own at real-time priority where allowed, so that no callback, burst of messages, graph change
 or busy process delays a command. A plan that becomes ready wakes it at once (``poke``): the
-motion starts then, not at the next period, and the periods run on from there."""
+motion starts then, not at the next period, and the periods run on from there.
+
+In simulated time the sim steps once per command, so a tick is an answer to one step: it
+waits (up to ``SIM_INPUT_WAIT_S`` of wall time) until ``has_input(now)`` says the step's
+reading is in, rather than answer on the reading before; and it is never poked, since an
+extra command would put every later one a period behind the state it was computed for."""
 
 import threading
 import time
@@ -12,6 +17,8 @@ from arm_control.nodes.realtime import raise_this_thread
 
 # With simulated time the clock only moves when /clock does: look this often (wall s).
 SIM_TIME_POLL_S = 0.001
+# With simulated time, a due tick waits at most this long (wall s) for the step's reading.
+SIM_INPUT_WAIT_S = 0.02
 # The clock's rate is measured over this much wall time.
 RATE_WINDOW_S = 0.5
 
@@ -40,8 +47,10 @@ class ControlLoop:
     ``priority_problem`` says why the thread could not run at ``realtime_priority``;
     ``clock_rate`` is the clock's seconds per wall second."""
 
-    def __init__(self, clock, period_s: float, tick, realtime_priority: int = 0, warn=print):
+    def __init__(self, clock, period_s: float, tick, realtime_priority: int = 0, warn=print,
+                 has_input=lambda now_s: True):
         self.clock, self.period_s, self.tick = clock, period_s, tick
+        self.has_input = has_input
         self.realtime_priority, self.warn = realtime_priority, warn
         self.priority_problem = None
         self.rate = ClockRate()
@@ -60,8 +69,9 @@ class ControlLoop:
         self._thread.start()
 
     def poke(self) -> None:
-        """Tick now, and count the periods on from here."""
-        self._wake.set()
+        """Tick now, and count the periods on from here (in real time)."""
+        if not self._simulated():
+            self._wake.set()
 
     def stop(self) -> None:
         self._stopping = True
@@ -77,17 +87,27 @@ class ControlLoop:
         if self.priority_problem:
             self.warn(self.priority_problem)
         due_s = self.now_s()
+        waiting_since = None                # wall s a due simulated tick began to wait
         while not self._stopping:
-            now = self.now_s()
-            self.rate.update(now, time.monotonic())
+            now, wall = self.now_s(), time.monotonic()
+            self.rate.update(now, wall)
             poked = self._wake.is_set()
+            if not poked and now >= due_s and self._simulated() and not self.has_input(now):
+                waiting_since = wall if waiting_since is None else waiting_since
+                if wall - waiting_since < SIM_INPUT_WAIT_S:
+                    self._wake.wait(SIM_TIME_POLL_S)
+                    continue
+            waiting_since = None
             if poked or now >= due_s:
                 self._wake.clear()
                 if self._stopping:
                     return
                 self.tick()
-                # On time: keep the phase. Poked, or a whole period late: a new phase.
-                due_s = (now if poked or now > due_s + self.period_s else due_s) + self.period_s
+                # On time: keep the phase. Poked, or a whole period late: a new phase. In
+                # simulated time the phase is the sim's steps: once per step, never twice for
+                # one (a clock two steps on must not leave a tick due at the same time).
+                late = poked or now > due_s + self.period_s or self._simulated()
+                due_s = (now if late else due_s) + self.period_s
                 continue
             wait_s = due_s - now
             if self._simulated():

@@ -104,7 +104,7 @@ class ControllerNode(Node):
         self.create_timer(1.0, self.publish_diagnostics)
         priority = self.config.realtime_priority
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
-                                self.get_logger().warning)
+                                self.get_logger().warning, self.has_reading)
         self.publish_outputs()
         self.loop.start()
         self.get_logger().info(f'controlling the arm at {self.config.loop_rate_hz:g} Hz'
@@ -211,6 +211,11 @@ class ControllerNode(Node):
         self.arm, self.config = arm, config
         self.outputs.trigger()
         return None
+
+    def has_reading(self, now_s: float) -> bool:
+        """The joint states of ``now_s`` (simulated time: the sim's step) are in."""
+        reading = self.reading
+        return reading is not None and reading[0].sampled_s >= now_s - 1e-6
 
     def watch_planner(self) -> None:
         """Tell the core when the planner (and the timing worker) comes or goes."""

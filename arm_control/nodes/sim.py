@@ -174,7 +174,6 @@ class SimNode(Node):
                 return                        # the controller has not answered this period
             self.commanded_this_period, self.period_began_wall_s = False, wall_s
             self.plant.advance(self.period_s)
-            self.clock_pub.publish(ClockMessage(clock=self.stamp()))
         now = self.now_s()
         stalled = now - self.last_step_s > 2.0 * self.period_s     # the sim's, not the robot's
         self.periods_s.append(now - self.last_step_s)
@@ -190,6 +189,8 @@ class SimNode(Node):
         self.catch_up(now)
         self.say_brownouts()
         self.publish(self.plant.read())
+        if self.simulated_time:     # after the reading: the controller's tick then finds it
+            self.clock_pub.publish(ClockMessage(clock=self.stamp()))
 
     def say_brownouts(self) -> None:
         for brownout in self.plant.brownouts[self.brownouts_said:]:
@@ -202,9 +203,9 @@ class SimNode(Node):
         self.brownouts_said = len(self.plant.brownouts)
 
     def publish(self, reading) -> None:
+        """One instant's reading; ``joint_states`` last, so that a controller reading it finds
+        the encoders and the bus of the same instant already there."""
         stamp = self.stamp()
-        self.joint_states_pub.publish(messages.joint_state(
-            stamp, reading.potentiometer_rad, reading.velocity_rad_s, reading.effort_nm))
         self.encoders_pub.publish(messages.joint_state(stamp, reading.encoder_rad,
                                                        reading.encoder_velocity_rad_s))
         truth = reading.true_state
@@ -221,6 +222,8 @@ class SimNode(Node):
         self.battery_pub.publish(battery)
         self.currents_pub.publish(Float64MultiArray(
             data=[float(i) for i in reading.motor_current_a]))
+        self.joint_states_pub.publish(messages.joint_state(
+            stamp, reading.potentiometer_rad, reading.velocity_rad_s, reading.effort_nm))
 
     def publish_diagnostics(self) -> None:
         periods, self.periods_s = self.periods_s, []
