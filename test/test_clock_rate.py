@@ -29,3 +29,11 @@ def test_a_paused_clock_keeps_the_last_rate_and_a_new_speed_is_followed():
     assert fed(at_five + paused) == pytest.approx(5.0)
     slower = ticks(2.0, 2.0 + 2 * RATE_WINDOW_S, start=paused[-1])
     assert fed(at_five + paused + slower) == pytest.approx(2.0)
+
+
+def test_a_brief_slowdown_does_not_shrink_a_wall_time_budget():
+    """A sim in step with a slow process runs slower for a moment: the rate stays the most
+    of the last windows, so a wall-time budget on the clock does not get shorter."""
+    at_five = ticks(5.0, 3.0)
+    slow = ticks(1.0, RATE_WINDOW_S, start=at_five[-1])[1:]
+    assert fed(at_five + slow) == pytest.approx(5.0)

@@ -19,16 +19,23 @@ from arm_control.nodes.realtime import raise_this_thread
 SIM_TIME_POLL_S = 0.001
 # With simulated time, a due tick waits at most this long (wall s) for the step's reading.
 SIM_INPUT_WAIT_S = 0.02
+# A tick is due this close to its time: a clock of ~1e9 s in float seconds is exact to ~1e-7 s,
+# and in simulated time a step's time a hair early would leave the sim waiting on the tick.
+DUE_SLACK_S = 1e-4
 # The clock's rate is measured over this much wall time.
 RATE_WINDOW_S = 0.5
+RATE_MEMORY = 4
 
 
 class ClockRate:
-    """Seconds of the node's clock per wall second: 1 in real time, 5 with the sim at 5x.
-    Windows in which the clock stood still (a paused sim) leave it as it was."""
+    """Seconds of the node's clock per wall second: 1 in real time, 5 with the sim at 5x;
+    the most of the last ``RATE_MEMORY`` windows, since a sim in step with a slow process
+    runs slower now and then, and a budget in wall time must not shrink with it. Windows in
+    which the clock stood still (a paused sim) are left out."""
 
     def __init__(self):
         self.rate = 1.0
+        self._rates = []
         self._since = None                   # (clock s, wall s) at the window's start
 
     def update(self, clock_s: float, wall_s: float) -> float:
@@ -37,7 +44,9 @@ class ClockRate:
         clock0, wall0 = self._since
         if wall_s - wall0 >= RATE_WINDOW_S:
             if clock_s > clock0:
-                self.rate = (clock_s - clock0) / (wall_s - wall0)
+                self._rates = (self._rates + [(clock_s - clock0) / (wall_s - wall0)])[
+                    -RATE_MEMORY:]
+                self.rate = max(self._rates)
             self._since = (clock_s, wall_s)
         return self.rate
 
@@ -92,13 +101,14 @@ class ControlLoop:
             now, wall = self.now_s(), time.monotonic()
             self.rate.update(now, wall)
             poked = self._wake.is_set()
-            if not poked and now >= due_s and self._simulated() and not self.has_input(now):
+            due = now >= due_s - DUE_SLACK_S
+            if not poked and due and self._simulated() and not self.has_input(now):
                 waiting_since = wall if waiting_since is None else waiting_since
                 if wall - waiting_since < SIM_INPUT_WAIT_S:
                     self._wake.wait(SIM_TIME_POLL_S)
                     continue
             waiting_since = None
-            if poked or now >= due_s:
+            if poked or due:
                 self._wake.clear()
                 if self._stopping:
                     return

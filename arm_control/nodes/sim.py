@@ -140,6 +140,10 @@ class SimNode(Node):
         if self.timed_out:
             self.timed_out = False
             self.get_logger().info('voltage commands arriving')
+        if self.simulated_time:     # the next period now, if its wall time has come
+            wall_s = self.wall_clock.now().nanoseconds * 1e-9
+            if wall_s - self.period_began_wall_s >= self.period_s / self.config.sim_time_factor:
+                self.step()
 
     def on_set_state(self, msg: JointState) -> None:
         position = messages.joint_pair(msg, 'position')

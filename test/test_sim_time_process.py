@@ -1,0 +1,59 @@
+"""Simulated time: the sim owns the clock and runs it faster than real time; the planner and
+the controller follow it (``use_sim_time``), and the arm moves as it does in real time."""
+
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from test_controller_process import (assert_each_goal_reached_and_still, goal_publisher,
+                                     reached, tool_track)
+
+from arm_control.model.world import ForbiddenSpace
+from arm_control.nodes.common import controller_sees_planner, LATCHED
+
+SIM_SPEED = 4.0
+
+
+def stamp_s(stamp) -> float:
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+def test_the_nodes_follow_the_sims_clock_faster_than_real_time(launch, probe, arm):
+    launch('sim', '-p', f'sim_time_factor:={SIM_SPEED:g}')
+    for name in ('planner', 'controller'):
+        launch(name, '-p', 'use_sim_time:=true')
+    clock = []                                      # (wall s, sim s)
+    probe.node.create_subscription(
+        Clock, '/clock', lambda m: clock.append((time.monotonic(), stamp_s(m.clock))), 100)
+    setpoints = probe.collect(JointState, '/controller/setpoint')
+    truth = probe.collect(JointState, '/sim/ground_truth')
+    states = probe.collect(String, '/arm_state', LATCHED)
+    events = probe.collect(String, '/controller/events', 50)
+    diagnostics = probe.collect(DiagnosticArray, '/diagnostics')
+
+    def ready():
+        seen = [s for s in map(controller_sees_planner, diagnostics) if s is not None]
+        return seen and seen[-1] and states and states[-1].data == 'waiting'
+    assert probe.spin_until(ready, 30.0), [s.data for s in states]
+    truth.clear()
+    send = goal_publisher(probe)
+    goals = [(-1.0, 1.0), (1.1, 0.9)]
+    began = len(clock)
+    for goal in goals:
+        send(*goal)
+    assert probe.spin_until(lambda: len(reached(events)) == len(goals), 30.0), \
+        [e.data for e in events]
+    probe.spin_for(0.5)
+
+    # The sim's clock ran faster than the wall's while the arm moved ...
+    (wall0, sim0), (wall1, sim1) = clock[began], clock[-1]
+    assert (sim1 - sim0) / (wall1 - wall0) > 0.5 * SIM_SPEED
+    # ... and the controller's messages are stamped on it.
+    assert abs(stamp_s(setpoints[-1].header.stamp) - sim1) < 0.5
+    # The arm moved as in real time: each goal reached and held, nothing below the floor.
+    q, qd, xy = tool_track(arm, truth)
+    assert_each_goal_reached_and_still(goals, xy, qd, 0.031)
+    assert np.min(ForbiddenSpace(arm).lowest_point_m(q)) >= 0.0
