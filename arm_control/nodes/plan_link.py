@@ -19,6 +19,12 @@ from arm_control.nodes import messages
 from arm_control.nodes.plan_worker import PlanWorker
 from arm_control.planning.planner import waypoints_from_poses
 
+# A call unanswered this long (wall s) is sent again, at most RESENDS times: a planner that
+# has just found us, or that we have just found, may not yet reach our reply reader, and its
+# answer is lost (DDS discovery is not symmetric in time). Its usual answer takes 10-60 ms.
+RESEND_AFTER_S = 0.3
+RESENDS = 2
+
 
 class PlanLink:
     """One node's planner client and timing worker; made first thing at the node's start,
@@ -32,7 +38,7 @@ class PlanLink:
         self.on_timed = on_timed
         self.client = node.create_client(GetPlan, 'plan_path')
         self.worker = PlanWorker(arm, config, self._timed)
-        self.calls = {}                      # unanswered calls -> when they were sent
+        self.calls = {}                      # unanswered call -> (sent at, request, sends)
         self.answered_s = {}                 # request id -> when the planner answered
 
     def now_s(self) -> float:
@@ -43,22 +49,28 @@ class PlanLink:
         a restarted planner will never answer are forgotten after twice the timeout (wall
         time: planning takes it, whatever the clock)."""
         now = time.monotonic()
-        for future, sent_s in list(self.calls.items()):
-            if now - sent_s > 2.0 * self.planner_timeout_s:
+        for future, (sent_s, request, sends) in list(self.calls.items()):
+            late = now - sent_s > RESEND_AFTER_S and sends <= RESENDS
+            if late or now - sent_s > 2.0 * self.planner_timeout_s:
                 self.client.remove_pending_request(future)
                 del self.calls[future]
+                if late:
+                    self._call(request, sends + 1)
         return self.client.service_is_ready() and self.worker.ready.is_set()
 
     def send(self, requests) -> None:
         for request in requests:
-            header = messages.header(self.node.get_clock().now().to_msg())
-            message = GetPlan.Request()
-            message.start = messages.pose_stamped(*self.kinematics.tool_pose(request.start_q),
-                                                  header)
-            message.goal = messages.pose_stamped(*request.goal.xy, 0.0, header)
-            future = self.client.call_async(message)
-            self.calls[future] = time.monotonic()
-            future.add_done_callback(lambda done, r=request: self._answered(r, done))
+            self._call(request, 1)
+
+    def _call(self, request, sends: int) -> None:
+        header = messages.header(self.node.get_clock().now().to_msg())
+        message = GetPlan.Request()
+        message.start = messages.pose_stamped(*self.kinematics.tool_pose(request.start_q),
+                                              header)
+        message.goal = messages.pose_stamped(*request.goal.xy, 0.0, header)
+        future = self.client.call_async(message)
+        self.calls[future] = (time.monotonic(), request, sends)
+        future.add_done_callback(lambda done, r=request: self._answered(r, done))
 
     def _timed(self, timed) -> None:
         """From the worker: stamped with when the planner answered and when it came back."""
