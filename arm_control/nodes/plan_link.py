@@ -19,9 +19,12 @@ from arm_control.nodes import messages
 from arm_control.nodes.plan_worker import PlanWorker
 from arm_control.planning.planner import waypoints_from_poses
 
-# A call unanswered this long (wall s) is sent again, at most RESENDS times: a planner that
-# has just found us, or that we have just found, may not yet reach our reply reader, and its
-# answer is lost (DDS discovery is not symmetric in time). Its usual answer takes 10-60 ms.
+# While the link is new (this long, wall s, since the planner was found), a call unanswered
+# this long is sent again, at most RESENDS times: a planner we have just found may not yet
+# reach our reply reader, and its answer is lost (DDS discovery is not symmetric in time).
+# Its usual answer takes 10-60 ms. Later, a slow planner is only slow: sending again would
+# queue more work before the next goal's call.
+NEW_LINK_S = 5.0
 RESEND_AFTER_S = 0.3
 RESENDS = 2
 
@@ -40,6 +43,7 @@ class PlanLink:
         self.worker = PlanWorker(arm, config, self._timed)
         self.calls = {}                      # unanswered call -> (sent at, request, sends)
         self.answered_s = {}                 # request id -> when the planner answered
+        self.found_s = None                  # when the planner was last found (wall s)
 
     def now_s(self) -> float:
         return self.node.get_clock().now().nanoseconds * 1e-9
@@ -49,14 +53,17 @@ class PlanLink:
         a restarted planner will never answer are forgotten after twice the timeout (wall
         time: planning takes it, whatever the clock)."""
         now = time.monotonic()
+        found = self.client.service_is_ready()
+        self.found_s = (self.found_s or now) if found else None
+        new_link = found and now - self.found_s < NEW_LINK_S
         for future, (sent_s, request, sends) in list(self.calls.items()):
-            late = now - sent_s > RESEND_AFTER_S and sends <= RESENDS
+            late = new_link and now - sent_s > RESEND_AFTER_S and sends <= RESENDS
             if late or now - sent_s > 2.0 * self.planner_timeout_s:
                 self.client.remove_pending_request(future)
                 del self.calls[future]
                 if late:
                     self._call(request, sends + 1)
-        return self.client.service_is_ready() and self.worker.ready.is_set()
+        return found and self.worker.ready.is_set()
 
     def send(self, requests) -> None:
         for request in requests:
