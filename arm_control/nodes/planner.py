@@ -98,14 +98,20 @@ class PlannerNode(Node):
             f'{len(self.arm.world.regions)} forbidden regions; built in {self.build_s:.2f} s')
 
     def prepare_next(self) -> None:
+        """One tree, then a pause of twice what it took: the executor takes a due timer
+        before a waiting request, so trees built back to back (a loaded machine, where one
+        takes longer than the period) would keep plan_path waiting until the last one."""
+        self.destroy_timer(self.prepare_timer)
         if not self.to_prepare:
-            self.prepare_timer.cancel()
             return
+        began = time.monotonic()
         try:
             self.planner.prepare(self.to_prepare.pop(0))
         except Exception as error:                  # a failed table is no reason to stop
             self.get_logger().error(f'preparing the preset paths failed: {error!r}')
             self.to_prepare = []
+        pause_s = max(PREPARE_PERIOD_S, 2.0 * (time.monotonic() - began))
+        self.prepare_timer = self.create_timer(pause_s, self.prepare_next)
 
     # plan_path
 
