@@ -246,7 +246,8 @@ class PlanHandoff:
     """The goal being planned: its request, when it must be answered, and what an answer
     means for the arm. Planning takes wall time: with a clock ``clock_rate`` times faster
     (the sim at 5x), the planner timeout and the lead of a plan from a moving start are as
-    many times longer on it."""
+    many times longer on it, at the rate known when they are checked (a sim is slow at
+    first, while the controller starts)."""
 
     def __init__(self, planner_timeout_s: float):
         self.planner_timeout_s = planner_timeout_s
@@ -254,13 +255,16 @@ class PlanHandoff:
         self.pending: Optional[PlanRequest] = None
         self._outbox: list[PlanRequest] = []
         self._next_id = 1
-        self.started_s, self.deadline_s = math.nan, math.inf
+        self.started_s = math.nan
         self.last: Optional[TimedPlan] = None
 
     def start(self, now_s: float) -> None:
         """A goal becomes current: it must have a plan within the planner timeout."""
         self.started_s = now_s
-        self.deadline_s = now_s + self.planner_timeout_s * self.clock_rate
+
+    @property
+    def deadline_s(self) -> float:
+        return self.started_s + self.planner_timeout_s * self.clock_rate
 
     def ask(self, now_s: float, goal: Goal, start_q, start_velocity_rad_s,
             start_time_s: Optional[float], lead_s: float) -> None:
