@@ -1,15 +1,27 @@
-"""Shared fixtures: the default arm, and isolated ROS domains for process-level tests."""
+"""Shared fixtures: the default arm, its controller settings and planner, and isolated ROS
+domains for process-level tests."""
 
 import dataclasses
 
 import pytest
 
 from arm_control import config
+from arm_control.planning.planner import Planner
 
 
 @pytest.fixture(scope='session')
 def arm() -> config.ArmConfig:
     return config.load('sim')[0]
+
+
+@pytest.fixture(scope='module')
+def controller_config():
+    return config.load('controller')[1]
+
+
+@pytest.fixture(scope='module')
+def planner(arm):
+    return Planner(arm, config.load('planner')[1])
 
 
 def with_joint(arm, joint_name, **changes):

@@ -27,16 +27,6 @@ from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.planner import Planner
 
 
-@pytest.fixture(scope='module')
-def controller_config():
-    return config.load('controller')[1]
-
-
-@pytest.fixture(scope='module')
-def planner(arm):
-    return Planner(arm, config.load('planner')[1])
-
-
 # --- reaching goals, with the estimator in the loop -----------------------------------------
 
 def test_reaches_every_preset_in_order_within_tolerance(arm, controller_config, planner):

@@ -8,20 +8,8 @@ from controller_rig import DEG, reading_at, Rig, START
 import numpy as np
 import pytest
 
-from arm_control import config
 from arm_control.control.controller import ArmController
 from arm_control.control.state_machine import ArmState, TRANSITIONS, Trigger
-from arm_control.planning.planner import Planner
-
-
-@pytest.fixture(scope='module')
-def controller_config():
-    return config.load('controller')[1]
-
-
-@pytest.fixture(scope='module')
-def planner(arm):
-    return Planner(arm, config.load('planner')[1])
 
 
 # --- driver mode -----------------------------------------------------------------------------

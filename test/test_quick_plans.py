@@ -27,7 +27,6 @@ from arm_control.control.trajectory.timing import check
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.plan_worker import PlanWorker
-from arm_control.planning.planner import Planner
 
 STEP_RAD = 0.001745
 PATHS = {
@@ -113,11 +112,6 @@ def test_no_refinement_past_the_end_of_the_quick_trajectory(setup):
 
 
 # --- the goal runner -------------------------------------------------------------------------
-
-@pytest.fixture(scope='module')
-def planner(arm):
-    return Planner(arm, config.load('planner')[1])
-
 
 def started_goal(arm, planner, preset='back_score'):
     """A closed loop whose core took a quick plan to ``preset``: (loop, quick, its motion)."""

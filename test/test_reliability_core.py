@@ -11,7 +11,6 @@ import dataclasses
 import math
 
 import numpy as np
-import pytest
 
 from arm_control import config
 from arm_control.control.controller import ArmController
@@ -23,11 +22,6 @@ from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.planner import Planner
 
 START = (1.5708, -1.5708)
-
-
-@pytest.fixture(scope='module')
-def controller_config():
-    return config.load('controller')[1]
 
 
 def run(core, plant, seconds, period_s, sensors=True, until=None):

@@ -2,6 +2,7 @@
 move, a quasistatic sweep of one joint, and a coupled multi-sine. ``sample(t)`` gives q, q̇,
 q̈ at the times t, each (N, 2)."""
 
+from abc import ABC, abstractmethod
 import math
 
 import numpy as np
@@ -15,15 +16,16 @@ def _smoothstep(u):
             60.0 * u * (1.0 - u) * (1.0 - 2.0 * u))
 
 
-class Segment:
+class Segment(ABC):
     """A reference motion over [0, duration_s]: ``sample(t)`` gives q, q̇, q̈, each (N, 2)."""
 
     duration_s: float
     start_rad: np.ndarray
     end_rad: np.ndarray
 
+    @abstractmethod
     def sample(self, t):
-        raise NotImplementedError
+        """q, q̇, q̈ at the times ``t`` (s from the segment's start)."""
 
 
 class Hold(Segment):
