@@ -136,7 +136,7 @@ class RosMoves:
         rig.goal_pub.publish(message)
         outcome = ('goal_reached', 'goal_failed', 'goal_rejected', 'estop', 'control_failed')
         rig.spin_until(lambda: any(parse_event(e)[0] in outcome
-                                   for e in rig.event_log(began)), MOVE_TIMEOUT_S)
+                                   for e in rig.events_heard(began)), MOVE_TIMEOUT_S)
 
         def at_rest():
             recent = [row for row in self.truth if row[0] >= self.truth[-1][0] - REST_FOR_S]
@@ -144,7 +144,7 @@ class RosMoves:
             return len(recent) > 5 and np.max(np.ptp(q, axis=0)) < REST_BAND_RAD
         rig.spin_until(lambda: len(self.truth) > 5 and at_rest(), 3.0)
         rig.spin_for(REST_FOR_S)
-        events = [e for e in rig.event_log(began) if parse_event(e)[0] in outcome]
+        events = [e for e in rig.events_heard(began) if parse_event(e)[0] in outcome]
         rows = np.array([row for row in self.truth if row[0] >= published_s - 0.05])
         kind, _, sentence = parse_event(events[0]) if events else ('none', '', '')
         return {'outcome': kind, 'sentence': sentence,

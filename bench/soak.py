@@ -192,7 +192,7 @@ def contact_runs(rig: ArmRig):
 
 
 def report(soak: Soak, rig: ArmRig, minutes: float) -> None:
-    events = rig.event_log()
+    events = rig.events_heard()
     reached = [e for e in events if e.startswith('reached')]
     refused = [e for e in events if ('rejected' in e or 'failed' in e)
                and not e.startswith('reached')]

@@ -30,9 +30,11 @@ from std_srvs.srv import Trigger
 
 from arm_control import config
 from arm_control.control.events import parse_event
+from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED
 
 START_Q = np.array(config.load('sim')[1].initial_position)
+FORBIDDEN = ForbiddenSpace(config.load('controller')[0])
 DEG = math.pi / 180.0
 # The flood's publisher keeps its goals until the controller has them (a user's script
 # with COMMANDS' depth of 10 loses some to overwriting when the subscriber falls behind).
@@ -67,6 +69,22 @@ class Heard(list):
 
     def last(self):
         return self[-1][1] if self else None
+
+
+def assert_never_forbidden(rig, since_s: float) -> None:
+    """The sim's true state, since ``since_s``, never in forbidden space; else say when, how
+    deep and for how long, with what the controller said meanwhile."""
+    heard = [(t, m) for t, m in rig.truth if t >= since_s]
+    q = np.array([m.position for _, m in heard]).reshape(-1, 2)
+    free = np.asarray(FORBIDDEN.is_free(q))
+    if np.all(free):
+        return
+    times = np.array([t for t, _ in heard])[~free] - since_s
+    depth_mm = -1000 * np.min(FORBIDDEN.lowest_point_m(q[~free]))
+    raise AssertionError(
+        f'{np.sum(~free)} true samples in forbidden space, {depth_mm:.0f} mm deep, from '
+        f'{times[0]:.2f} s to {times[-1]:.2f} s; first: {FORBIDDEN.why_forbidden(q[~free][0])} '
+        f'at {np.round(np.degrees(q[~free][0]), 1)} deg\n{rig.event_log(since_s)}')
 
 
 def diagnostic_values(message: DiagnosticArray, name: str) -> dict:
@@ -211,8 +229,13 @@ class ArmRig:
         """When the first event of ``kind`` since ``since_s`` was heard."""
         return min(t for t, m in self.events if t >= since_s and parse_event(m.data)[0] == kind)
 
-    def event_log(self, since_s=-math.inf) -> list:
+    def events_heard(self, since_s=-math.inf) -> list:
+        """The events heard since ``since_s``, as published."""
         return [m.data for m in self.events.messages(since_s)]
+
+    def event_log(self, since_s=-math.inf) -> str:
+        """The same, one a line: an assertion's message in full (pytest shortens a list)."""
+        return '\n'.join(['events heard:'] + self.events_heard(since_s))
 
     def ready(self, timeout_s: float = 40.0) -> None:
         """Wait for the planner and the controller, then put the arm at its start, held."""

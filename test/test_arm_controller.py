@@ -325,7 +325,7 @@ def test_cancel_brakes_along_the_path_and_holds(arm, controller_config, planner)
 
 
 @pytest.mark.parametrize('start_xy, goal_xy', [((0.676, 0.148), (0.013, 0.589)),
-                                               ((0.9, 0.228), (0.077, 0.464)),
+                                               ((0.601, 0.24), (-0.036, 0.59)),
                                                ((-0.4, 0.3), (0.25, 0.45))])
 def test_timed_moves_keep_the_clearance_from_forbidden_space(arm, controller_config, start_xy,
                                                              goal_xy):

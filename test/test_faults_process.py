@@ -19,7 +19,7 @@ The first five share one launch of sim, planner and controller, in order.
 import math
 import time
 
-from arm_rig import ArmRig, DEG
+from arm_rig import ArmRig, assert_never_forbidden, DEG
 from nav_msgs.srv import GetPlan
 import numpy as np
 from std_srvs.srv import Trigger
@@ -33,13 +33,6 @@ TIMEOUT_S = CONTROLLER.joint_state_timeout_s
 # Probe-side slack on top of a bound the controller keeps: DDS delivery both ways, and the
 # probe's own scheduling on a shared machine.
 PROBE_SLACK_S = 0.1
-
-
-def assert_never_forbidden(messages):
-    q = np.array([m.position for m in messages]).reshape(-1, 2)
-    free = np.asarray(FORBIDDEN.is_free(q))
-    assert np.all(free), (f'{np.sum(~free)} true samples in forbidden space, first: '
-                          f'{FORBIDDEN.why_forbidden(q[~free][0])}')
 
 
 def zero(message) -> bool:
@@ -76,7 +69,7 @@ def test_joint_states_stop_then_return(rig):
     assert rig.said('sensors_back', began)
     assert any(d['level'] == 1 and 'no_sensors' in d['message']    # 1.5 s: one at least
                for d in rig.controller_diagnostics(paused))
-    assert_never_forbidden(rig.truth.messages(began))
+    assert_never_forbidden(rig, began)
 
 
 def test_planner_slow_or_down_rejects_the_goal_in_bounded_time(rig):
@@ -146,7 +139,7 @@ def test_sim_restart_mid_motion(rig):
         rig.event_log(began)
     states = [m.data for m in rig.states.messages(began)]
     assert 'no_sensors' in states and 'estopped' not in states, states
-    assert_never_forbidden(rig.truth.messages(began))
+    assert_never_forbidden(rig, began)
 
 
 def test_controller_restart_mid_motion_comes_back_holding(rig):
@@ -196,7 +189,7 @@ def test_controller_restart_mid_motion_comes_back_holding(rig):
     print(f'  lowest point at takeover {1000 * FORBIDDEN.lowest_point_m(taken_q):.0f} mm, '
           f'held {1000 * held_depth_m:.0f} mm, after it {1000 * min(lowest_m):.0f} mm')
     assert min(lowest_m) >= held_depth_m - 0.01
-    assert_never_forbidden(rig.truth.messages(rig.said_at('goal_reached', mark)))
+    assert_never_forbidden(rig, rig.said_at('goal_reached', mark))
 
 
 def test_estop_by_service(rig):
@@ -220,7 +213,7 @@ def test_estop_by_service(rig):
     rested = rig.true_q()
     rig.spin_for(1.0)
     assert np.max(np.abs(rig.true_q() - rested)) < 1.0 * DEG     # ... and held up there
-    assert_never_forbidden(rig.truth.messages(stopped))
+    assert_never_forbidden(rig, stopped)
 
     cut = time.monotonic()
     assert rig.call(Trigger, '/controller/estop').success

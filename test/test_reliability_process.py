@@ -12,7 +12,7 @@ One launch for the module: the tests run in order on the same three processes.
 import math
 import time
 
-from arm_rig import BAD_GOALS, DEG, periods, start_flood
+from arm_rig import assert_never_forbidden, BAD_GOALS, DEG, periods, start_flood
 import numpy as np
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -21,12 +21,10 @@ from std_srvs.srv import Trigger
 from arm_control import config
 from arm_control.control.events import parse_event
 from arm_control.model.kinematics import TwoLinkKinematics
-from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.common import COMMANDS
 
 ARM, CONTROLLER = config.load('controller')
 KINEMATICS = TwoLinkKinematics(ARM.shoulder.length_m, ARM.elbow.length_m)
-FORBIDDEN = ForbiddenSpace(ARM)
 FLOOD_RATE_HZ = 1000.0
 FLOOD_S = 10.0
 
@@ -38,15 +36,6 @@ def tool_xy(messages) -> np.ndarray:
 def queued(rig) -> list:
     message = rig.queue.last()
     return [(round(p.pose.position.x, 3), round(p.pose.position.y, 3)) for p in message.poses]
-
-
-def assert_never_forbidden(messages):
-    q = np.array([m.position for m in messages]).reshape(-1, 2)
-    free = np.asarray(FORBIDDEN.is_free(q))
-    depth_mm = -1000 * np.min(FORBIDDEN.lowest_point_m(q[~free])) if np.any(~free) else 0.0
-    assert np.all(free), (f'{np.sum(~free)} true samples in forbidden space, {depth_mm:.0f} mm '
-                          f'deep, first: {FORBIDDEN.why_forbidden(q[~free][0])} at '
-                          f'{np.round(np.degrees(q[~free][0]), 1)} deg')
 
 
 def test_bad_goals_are_said_published_and_lose_nothing(rig):
@@ -74,7 +63,7 @@ def test_bad_goals_are_said_published_and_lose_nothing(rig):
     assert rig.wait_still()
     xy = tool_xy(rig.truth.messages(began)[-5:])
     assert np.max(np.linalg.norm(xy - goals[-1], axis=1)) < 0.031
-    assert_never_forbidden(rig.truth.messages(began))
+    assert_never_forbidden(rig, began)
     # The log says each one, and the diagnostics count them with the last reason.
     log = rig.output('controller')
     for _, cause in BAD_GOALS:
@@ -172,7 +161,12 @@ def test_flood_of_goals_bounded_memory_and_loop_rate(rig):
     def taken():            # goals the controller has answered, by its diagnostics
         last = rig.controller_diagnostics(began)[-1]
         return int(last['goals rejected']) + int(last['goals queued']) - before
-    rig.spin_until(lambda: taken() >= sent, 10.0)       # diagnostics come once a second
+    # Diagnostics come once a second. On a loaded machine the controller takes the goals
+    # more slowly than they came (they wait in its subscription): wait while it makes way.
+    counted = -1
+    while counted < taken() < sent:
+        counted = taken()
+        rig.spin_until(lambda: taken() >= sent, 5.0)
     counted = taken()
 
     def answers():          # said one by one, or counted in the summary of each second
@@ -188,7 +182,7 @@ def test_flood_of_goals_bounded_memory_and_loop_rate(rig):
     gaps_s = periods(heard)
     own_s = [float(d['loop period worst (s)']) for d in rig.controller_diagnostics(began)
              if d['loop period worst (s)'] != 'nan']
-    others = [e for e in rig.event_log(began)
+    others = [e for e in rig.events_heard(began)
               if parse_event(e)[0] not in ('goal_queued', 'goal_rejected', 'goals_rejected')]
     print(f'flood: {sent} goals in {ended - began:.1f} s, {counted} taken by the controller, '
           f'{answered} answers heard; voltage_command at {rate_hz:.1f} Hz, period median '
@@ -211,7 +205,7 @@ def test_flood_of_goals_bounded_memory_and_loop_rate(rig):
     # The queue stays within its size; the goals taken were reached, in the free space.
     assert longest_queue <= CONTROLLER.goal_queue_size + 1     # the current goal first
     assert rig.said('goals_rejected', began)
-    assert_never_forbidden(rig.truth.messages(began))
+    assert_never_forbidden(rig, began)
     # Each rejection is published; the log is throttled, not one line per goal.
     lines = len(rig.output('controller').splitlines()) - log_lines_before
     assert lines < sent / 10, f'{lines} log lines for {sent} goals'

@@ -19,12 +19,12 @@ from arm_control.nodes import messages
 from arm_control.nodes.plan_worker import PlanWorker
 from arm_control.planning.planner import waypoints_from_poses
 
-# While the link is new (this long, wall s, since the planner was found), a call unanswered
-# this long is sent again, at most RESENDS times: a planner we have just found may not yet
-# reach our reply reader, and its answer is lost (DDS discovery is not symmetric in time).
-# Its usual answer takes 10-60 ms. Later, a slow planner is only slow: sending again would
-# queue more work before the next goal's call.
-NEW_LINK_S = 5.0
+# Until the planner has answered us once since we found it, a call unanswered this long is
+# sent again, at most RESENDS times: a planner we have just found may not yet reach our reply
+# reader, and its answer is lost (DDS discovery is not symmetric in time; under load it
+# takes seconds). The earlier calls stay open and the first answer counts: a first plan on a
+# loaded machine can take longer than this (0.47 s was seen), and the planner answers a
+# repeated request from its last answer. Once it has answered, a slow planner is only slow.
 RESEND_AFTER_S = 0.3
 RESENDS = 2
 
@@ -42,8 +42,10 @@ class PlanLink:
         self.client = node.create_client(GetPlan, 'plan_path')
         self.worker = PlanWorker(arm, config, self._timed)
         self.calls = {}                      # unanswered call -> (sent at, request, sends)
+        self.sends = {}                      # request id -> calls made for it so far
         self.answered_s = {}                 # request id -> when the planner answered
-        self.found_s = None                  # when the planner was last found (wall s)
+        self.found = False                   # the client reaches the planner
+        self.heard = False                   # ... and the planner has answered since
 
     def now_s(self) -> float:
         return self.node.get_clock().now().nanoseconds * 1e-9
@@ -53,17 +55,15 @@ class PlanLink:
         a restarted planner will never answer are forgotten after twice the timeout (wall
         time: planning takes it, whatever the clock)."""
         now = time.monotonic()
-        found = self.client.service_is_ready()
-        self.found_s = (self.found_s or now) if found else None
-        new_link = found and now - self.found_s < NEW_LINK_S
+        self.found = self.client.service_is_ready()
+        self.heard = self.heard and self.found
         for future, (sent_s, request, sends) in list(self.calls.items()):
-            late = new_link and now - sent_s > RESEND_AFTER_S and sends <= RESENDS
-            if late or now - sent_s > 2.0 * self.planner_timeout_s:
-                self.client.remove_pending_request(future)
-                del self.calls[future]
-                if late:
-                    self._call(request, sends + 1)
-        return found and self.worker.ready.is_set()
+            if now - sent_s > 2.0 * self.planner_timeout_s:
+                self._forget(future)
+            elif self.found and not self.heard and now - sent_s > RESEND_AFTER_S \
+                    and sends == self.sends.get(request.request_id) and sends <= RESENDS:
+                self._call(request, sends + 1)
+        return self.found and self.worker.ready.is_set()
 
     def send(self, requests) -> None:
         for request in requests:
@@ -77,7 +77,14 @@ class PlanLink:
         message.goal = messages.pose_stamped(*request.goal.xy, 0.0, header)
         future = self.client.call_async(message)
         self.calls[future] = (time.monotonic(), request, sends)
+        self.sends[request.request_id] = sends
         future.add_done_callback(lambda done, r=request: self._answered(r, done))
+
+    def _forget(self, future) -> None:
+        self.client.remove_pending_request(future)
+        _, request, _ = self.calls.pop(future)
+        if not any(call[1].request_id == request.request_id for call in self.calls.values()):
+            self.sends.pop(request.request_id, None)
 
     def _timed(self, timed) -> None:
         """From the worker: stamped with when the planner answered and when it came back."""
@@ -86,7 +93,13 @@ class PlanLink:
 
     def _answered(self, request, future) -> None:
         """The planner's path as joint waypoints, to the worker for timing."""
-        self.calls.pop(future, None)
+        if self.calls.pop(future, None) is None or \
+                self.sends.pop(request.request_id, None) is None:
+            return                                  # forgotten, or answered already
+        for other in [f for f, call in self.calls.items()
+                      if call[1].request_id == request.request_id]:
+            self._forget(other)
+        self.heard = self.found
         self.answered_s[request.request_id] = self.now_s()
         try:
             poses = messages.poses_of(future.result().plan)

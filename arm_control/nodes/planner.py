@@ -74,6 +74,7 @@ class PlannerNode(Node):
         self.config = PlannerConfig.from_parameters(params)
         began = time.monotonic()
         self.planner = Planner(self.arm, self.config)
+        self.last_plan = None                # ((start, goal), plan): the last answer
         self.ranking = BranchRanking(self.arm)
         self.build_s = time.monotonic() - began
         self.kinematics = self.planner.kinematics
@@ -167,8 +168,13 @@ class PlannerNode(Node):
 
     def plan(self, start_q, goal_xy):
         """The elbow branch that gets there soonest, as the controller would choose it
-        (``BranchRanking.plan``); the planner's own choice for a goal without a clear branch."""
-        return self.ranking.plan(self.planner, start_q, goal_xy)
+        (``BranchRanking.plan``); the planner's own choice for a goal without a clear branch.
+        A request made again (a client whose answer may have been lost) gets the last answer
+        at once, not a second search."""
+        key = (tuple(np.asarray(start_q, float)), tuple(goal_xy))
+        if self.last_plan is None or self.last_plan[0] != key:
+            self.last_plan = (key, self.ranking.plan(self.planner, start_q, goal_xy))
+        return self.last_plan[1]
 
     def check_frame(self, header, what: str) -> None:
         if header.frame_id not in ('', FRAME_ID):

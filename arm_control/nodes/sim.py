@@ -9,9 +9,13 @@ Subscribes ``voltage_command`` (Float64MultiArray [shoulder_V, elbow_V]) and ``~
 
 A command acts from when it arrives: the physics is brought up to that instant with the
 previous one first. No command for ``command_timeout_s`` -> 0 V, as a disabled robot. The
-sim's own late ticks (a loaded machine) are not the robot's: up to ``MAX_CATCH_UP_S`` the
-time they cover is simulated with the command the robot had; a longer stall (the process
-paused) is a pause of the whole world, and the arm goes on from where it was.
+sim's own late ticks are not the robot's: up to ``MAX_CATCH_UP_S`` since the physics last
+moved (a period and the usual jitter) is simulated with the command the robot had; the rest
+of a longer stall of the sim (the process paused, or starved on a loaded machine) is a pause
+of the whole world, and the arm goes on from where it was. The commands sent meanwhile were
+on time for the robot: running the stall on the older one had driven the arm at full volts
+where it should have braked, 200 mm into the floor. A stall of the controller alone is the
+robot's: the sim goes on with its last command.
 
 With ``sim_time_factor`` > 0 the sim owns time: it publishes ``/clock`` and advances the
 physics one period per tick of a wall-clock timer ``sim_time_factor`` times faster than real
@@ -39,8 +43,8 @@ from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, loop_statistics, run,
                                       STATE_STREAM, status)
 
-# Late ticks up to this are caught up; a longer stall is a pause of the world.
-MAX_CATCH_UP_S = 0.1
+# The physics catches up at most this much at once; the rest of a stall is a pause.
+MAX_CATCH_UP_S = 0.03
 # In simulated time, a period waits at most this long (real time) for the last one's command.
 LOCKSTEP_WAIT_S = 0.5
 
@@ -114,9 +118,9 @@ class SimNode(Node):
         if self.simulated_time:
             return                                    # time is the physics' own
         behind_s = now_s - self.clock_origin_s - self.plant.time_s
-        if behind_s > MAX_CATCH_UP_S:                 # a long stall: the world waited
-            self.clock_origin_s += behind_s
-            behind_s = 0.0
+        if behind_s > MAX_CATCH_UP_S:                 # the sim stalled: the world waited
+            self.clock_origin_s += behind_s - MAX_CATCH_UP_S
+            behind_s = MAX_CATCH_UP_S
         steps = math.floor(behind_s / self.plant.physics_step_s + 1e-9)
         self.plant.advance(steps * self.plant.physics_step_s)
 

@@ -36,7 +36,9 @@ from arm_control.sysid.report import identify
 from arm_control.sysid.session import provisional_model, Session
 from arm_control.sysid.settings import SysIdConfig
 
-DISCOVERY_S = 1.0           # joint states for this long before driving: other publishers show
+# Joint states for this long before driving, so that other publishers show: DDS discovery
+# took over 1 s on a loaded 2-core machine. Driving stops if one shows later.
+DISCOVERY_S = 2.0
 SHUTDOWN_ACK_S = 0.5        # at most this long on exit for the 0 V command to arrive
 LOG_NAME = 'log.mcap'
 

@@ -63,11 +63,11 @@ def best_shape(base: BlendedPath, dynamics: ArmDynamics, forbidden, limits: Traj
     grid = clustered(length, SEARCH_STAGES)
     fraction = grid / length
     q0, dq0, ddq0 = base(grid), base(grid, 1), base(grid, 2)
-    steps = np.diff(grid)
+    stages = np.diff(grid)
 
     def timed(terms, sag_v):
         A, B, C, D, W = rows(terms, limits, sag_v)
-        return fastest_speeds(A, B, C, D, W, speed_caps(limits, terms.dq), steps, start_speed)
+        return fastest_speeds(A, B, C, D, W, speed_caps(limits, terms.dq), stages, start_speed)
 
     terms = PathTerms(dynamics, q0, dq0, ddq0)
     x, sag = under_the_bus(exact_timing(terms, grid, limits, 0.0, start_speed), terms, limits,
@@ -75,7 +75,7 @@ def best_shape(base: BlendedPath, dynamics: ArmDynamics, forbidden, limits: Traj
     if x is None:
         return zeros, None, math.inf
     bus = None if limits.supply is None else (grid, sag)
-    unshaped_s = float(durations(steps, np.sqrt(x)[None])[0])
+    unshaped_s = float(durations(stages, np.sqrt(x)[None])[0])
     if not unshaped_s >= _MIN_DURATION_S:
         return zeros, bus, unshaped_s              # a hop: the search would cost more
     roomy = _with_room(forbidden.arm)
@@ -95,7 +95,7 @@ def best_shape(base: BlendedPath, dynamics: ArmDynamics, forbidden, limits: Traj
         out = np.full(len(shapes), np.inf)
         if np.any(ok):
             speeds = timed(PathTerms(dynamics, q[ok], dq[ok], ddq[ok]), sag)
-            out[ok] = durations(steps, speeds)
+            out[ok] = durations(stages, speeds)
         return out
 
     levels = np.linspace(-_SPAN, _SPAN, _GRID) * length
