@@ -1,0 +1,103 @@
+"""The controller's own stall, at every moment of a move near the floor: how deep it goes.
+
+A time-optimal move brakes the shoulder at its motors' current limit, so an arm that runs
+ahead of its setpoint cannot be braked harder. When the controller stalls, the motors go on
+with its last command (the sim does what a robot's motor controllers do), and a stall at
+the moment the shoulder should switch from driving to braking leaves the arm running ahead.
+
+In one process, in simulated time (``ClosedLoop``: the controller and the sim's plant, no
+ROS): for each move, the stall (the plant keeps its last command for ``--periods`` control
+periods) begins at each period of the move in turn. Per move and setting, the lowest point
+of either link over all those runs, and in how many runs a link went below the floor:
+
+- elbow keeps clear: as the controller runs (``SafetyRules.elbow_clear``);
+- elbow on its setpoint: the same with the elbow's target left as the trajectory says;
+- and with the feedback reserve on the braking side raised by 1 V: what braking headroom
+  buys instead, and what it costs in time.
+
+    python bench/stalls.py [--periods 2]
+"""
+
+import argparse
+import dataclasses
+from pathlib import Path
+import sys
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+from arm_control import config  # noqa: E402
+from arm_control.control.closed_loop import ClosedLoop  # noqa: E402
+from arm_control.control.goals import GoalValidator  # noqa: E402
+from arm_control.control.safety import SafetyRules  # noqa: E402
+from arm_control.model.world import ForbiddenSpace  # noqa: E402
+from arm_control.planning.planner import Planner  # noqa: E402
+
+# (name, start point, its elbow branch (index of free_configurations), goal point), in m.
+MOVES = [('back -> low front, full extension', (-1.0, 1.0), 1, (1.6, 0.12)),
+         ('low back -> low front', (-1.5, 0.15), 0, (1.5, 0.15)),
+         ('floor -> full extension, low', (0.6, 0.1), 0, (1.75, 0.1))]
+SETTLE_S = 0.5
+MOVE_LIMIT_S = 4.0
+
+
+def run(arm, controller, planner, start_q, goal_xy, stall_from, periods):
+    """(lowest point of either link (m, <= 0), time to holding (s)): the plant keeps its
+    last command for ``periods`` periods from the ``stall_from``-th command of the move."""
+    loop = ClosedLoop(arm, controller, planner=planner, start=tuple(start_q), seed=0)
+    forbidden = ForbiddenSpace(arm)
+    apply = loop.plant.set_voltage
+    sent = [0]
+
+    def maybe(voltage):
+        sent[0] += 1
+        if stall_from is None or not stall_from <= sent[0] < stall_from + periods:
+            apply(voltage)
+    loop.plant.set_voltage = maybe
+    loop.run(SETTLE_S)
+    began, sent[0] = loop.now, 0
+    loop.core.submit_goal(loop.now, *goal_xy)
+    lowest, reached = 0.0, None
+    while loop.now - began < MOVE_LIMIT_S:
+        loop.step()
+        lowest = min(lowest, float(forbidden.lowest_point_m(loop.true_q)))
+        if reached is None and str(loop.core.state) == 'holding':
+            reached = loop.now - began
+        if reached is not None and loop.now - began > reached + 0.5:
+            break
+    return lowest, reached
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--periods', type=int, default=2, help='stall length in periods')
+    args = parser.parse_args()
+    arm, controller = config.load('controller')
+    planner = Planner(arm, config.load('planner')[1])
+    keep_clear = SafetyRules.elbow_clear
+    settings = [('elbow keeps clear', controller, keep_clear),
+                ('elbow on its setpoint', controller, lambda self, shoulder, elbow: elbow),
+                ('+1 V braking reserve', dataclasses.replace(
+                    controller,
+                    feedback_voltage_reserve=controller.feedback_voltage_reserve + 1.0),
+                 keep_clear)]
+    print(f'A stall of {args.periods} periods ({args.periods * controller.period_s * 1000:.0f} '
+          'ms) beginning at each period of the move in turn; in one process, simulated time.')
+    print('| move | setting | move s (no stall) | lowest mm | runs below the floor |')
+    print('|---|---|---|---|---|')
+    for name, start_xy, branch, goal_xy in MOVES:
+        start_q = GoalValidator(arm).free_configurations(*start_xy)[branch]
+        for label, settings_controller, elbow_clear in settings:
+            SafetyRules.elbow_clear = elbow_clear
+            _, move_s = run(arm, settings_controller, planner, start_q, goal_xy, None, 0)
+            periods = int(round((move_s or MOVE_LIMIT_S) / controller.period_s))
+            lows = [run(arm, settings_controller, planner, start_q, goal_xy, k,
+                        args.periods)[0] for k in range(1, periods + 1)]
+            below = sum(low < 0.0 for low in lows)
+            print(f'| {name} | {label} | {move_s or float("nan"):.2f} | {1000 * min(lows):.0f} | '
+                  f'{below} of {len(lows)} |', flush=True)
+    SafetyRules.elbow_clear = keep_clear
+
+
+if __name__ == '__main__':
+    main()
