@@ -75,7 +75,7 @@ SUITE = [
     ('stow -> back (over the top)', (0.25, 0.45), (-1.0, 1.0)),
     ('floor pickup -> low back', (1.2, 0.15), (-1.2, 0.3)),
     ('back -> floor pickup', (-1.0, 1.0), (1.2, 0.15)),
-    ('floor -> full extension low', (1.2, 0.15), (1.75, 0.08)),
+    ('floor -> full extension low', (1.2, 0.15), (1.75, 0.1)),
     ('short hop, mid', (1.1, 0.9), (1.2, 0.95)),
     ('short hop, floor', (1.2, 0.15), (1.3, 0.2)),
     ('stow -> tall reach', (0.25, 0.45), (0.2, 1.75)),

@@ -1,4 +1,4 @@
-"""The controller's own stall, at every moment of a move near the floor: how deep it goes.
+"""The controller's own stall, at each moment of a move near the floor: how deep it goes.
 
 A time-optimal move brakes the shoulder at its motors' current limit, so an arm that runs
 ahead of its setpoint cannot be braked harder. When the controller stalls, the motors go on
@@ -7,7 +7,8 @@ the moment the shoulder should switch from driving to braking leaves the arm run
 
 In one process, in simulated time (``ClosedLoop``: the controller and the sim's plant, no
 ROS): for each move, the stall (the plant keeps its last command for ``--periods`` control
-periods) begins at each period of the move in turn. Per move and setting, the lowest point
+periods) begins at every ``--periods``-th period of the move in turn, so that every period
+of it is stalled in one run. Per move and setting, the lowest point
 of either link over all those runs, and in how many runs a link went below the floor:
 
 - elbow keeps clear: as the controller runs (``SafetyRules.elbow_clear``);
@@ -82,7 +83,7 @@ def main():
                     feedback_voltage_reserve=controller.feedback_voltage_reserve + 1.0),
                  keep_clear)]
     print(f'A stall of {args.periods} periods ({args.periods * controller.period_s * 1000:.0f} '
-          'ms) beginning at each period of the move in turn; in one process, simulated time.')
+          'ms), each period of the move stalled in one run; in one process, simulated time.')
     print('| move | setting | move s (no stall) | lowest mm | runs below the floor |')
     print('|---|---|---|---|---|')
     for name, start_xy, branch, goal_xy in MOVES:
@@ -92,7 +93,7 @@ def main():
             _, move_s = run(arm, settings_controller, planner, start_q, goal_xy, None, 0)
             periods = int(round((move_s or MOVE_LIMIT_S) / controller.period_s))
             lows = [run(arm, settings_controller, planner, start_q, goal_xy, k,
-                        args.periods)[0] for k in range(1, periods + 1)]
+                        args.periods)[0] for k in range(1, periods + 1, args.periods)]
             below = sum(low < 0.0 for low in lows)
             print(f'| {name} | {label} | {move_s or float("nan"):.2f} | {1000 * min(lows):.0f} | '
                   f'{below} of {len(lows)} |', flush=True)
