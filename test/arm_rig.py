@@ -37,8 +37,10 @@ START_Q = np.array(config.load('sim')[1].initial_position)
 FORBIDDEN = ForbiddenSpace(config.load('controller')[0])
 DEG = math.pi / 180.0
 # The flood's publisher keeps its goals until the controller has them (a user's script
-# with COMMANDS' depth of 10 loses some to overwriting when the subscriber falls behind).
-FLOOD_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+# with COMMANDS' depth of 10 loses some to overwriting when the subscriber falls behind): a
+# depth for a whole flood, since a loaded controller falls more than a second behind (with
+# 1000, 321 of 10,000 goals were overwritten before they were sent).
+FLOOD_QOS = QoSProfile(depth=20_000, reliability=ReliabilityPolicy.RELIABLE)
 
 # Bad goals of every kind, each with the cause its rejection must give.
 BAD_GOALS = [
@@ -330,6 +332,7 @@ def flood(domain: int, rate_hz: float, seconds: float) -> int:
     """Publish goals at ``rate_hz`` for ``seconds`` (in bursts every 10 ms); return the
     count sent."""
     import rclpy
+    from rclpy.duration import Duration
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('flood', context=context)
@@ -349,6 +352,9 @@ def flood(domain: int, rate_hz: float, seconds: float) -> int:
             publisher.publish(goals[sent % len(goals)])
             sent += 1
         time.sleep(0.01)
+    # Alive until the controller has them all: a reliable writer that goes away takes the
+    # goals not yet delivered with it.
+    publisher.wait_for_all_acked(Duration(seconds=60.0))
     node.destroy_node()
     rclpy.try_shutdown(context=context)
     return sent

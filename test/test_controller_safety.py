@@ -190,18 +190,21 @@ def test_the_elbow_folds_the_forearm_clear_of_a_shoulder_that_ran_low(arm, contr
     """At full extension near the floor, (1.6, 0.12) m with the elbow down, a shoulder 14 deg
     below its setpoint (braked at its current limit, it could not stop in time) would put the
     forearm in the floor: the elbow's target becomes the nearest angle that keeps half the
-    clearance. On its setpoint, the target stays."""
+    clearance. On its setpoint, or on a setpoint that is itself that near, the target stays."""
     rules = ArmController(arm, controller_config).safety
     goal = min(GoalValidator(arm).free_configurations(1.6, 0.12), key=lambda q: q[1])
-    assert rules.elbow_clear(goal[0], goal[1]) == goal[1]
+    assert rules.elbow_clear(goal[0], goal) == goal[1]
     space = ForbiddenSpace(arm, arm.world.clearance_rad / 2.0)
     shoulder = goal[0] - 14 * DEG
     assert not space.is_free((shoulder, goal[1]))
-    elbow = rules.elbow_clear(shoulder, goal[1])
+    elbow = rules.elbow_clear(shoulder, goal)
     assert space.is_free((shoulder, elbow))
     assert elbow > goal[1]                                    # folded up, out of the floor
     closer = elbow - np.sign(elbow - goal[1]) * 1 * DEG
     assert not space.is_free((shoulder, closer))
+    # A setpoint that itself passes that near (a path with no room): it is followed as is.
+    tight = np.array([shoulder, goal[1]])
+    assert rules.elbow_clear(shoulder - 1 * DEG, tight) == tight[1]
 
 
 def test_disable_sends_zero_and_enable_takes_the_arm_back_to_where_it_was_held(

@@ -148,13 +148,13 @@ def test_flood_of_goals_bounded_memory_and_loop_rate(rig):
     flood = start_flood(rig.domain, FLOOD_RATE_HZ, FLOOD_S)
     memory, longest_queue = [], 0
     began = time.monotonic()
-    while flood.poll() is None and time.monotonic() - began < FLOOD_S + 20.0:
+    while flood.poll() is None and time.monotonic() - began < FLOOD_S + 60.0:
         rig.spin_for(0.5)
         memory.append(rig.rss_mb('controller'))
         if rig.queue:
             longest_queue = max(longest_queue, len(rig.queue.last().poses))
     ended = time.monotonic()
-    output, _ = flood.communicate(timeout=10)
+    output, _ = flood.communicate(timeout=30)     # the flood waits until all are delivered
     sent = int(output.split()[-1])
     assert sent >= FLOOD_RATE_HZ * FLOOD_S * 0.99, output
 

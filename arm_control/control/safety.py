@@ -16,8 +16,9 @@ While it tracks, the elbow keeps the forearm clear of where the shoulder really 
 time-optimal move brakes the shoulder at its current limit, so a shoulder that runs ahead
 (the controller's own stall of 60 ms, with the last volts still driving) cannot be caught,
 and near the floor it would put the forearm 0.2-0.3 m into it. The elbow then has volts to
-spare: its target is moved, for as long as that lasts, to the nearest angle that keeps
-half the clearance with the shoulder as it is (``elbow_clear``).
+spare: where the setpoint keeps half the clearance, the elbow's target is moved, for as
+long as that lasts, to the nearest angle that keeps it with the shoulder as it is
+(``elbow_clear``).
 """
 
 import math
@@ -59,12 +60,15 @@ class SafetyRules:
         self.over_limit_since_s: Optional[float] = None
         self.forearm_space = ForbiddenSpace(arm, arm.world.clearance_rad / 2.0)
 
-    def elbow_clear(self, shoulder_rad: float, elbow_target_rad: float) -> float:
-        """The elbow angle nearest its target at which, with the shoulder at
-        ``shoulder_rad``, the arm keeps half the clearance: the target itself when it does,
-        or when no angle within 60 deg does (the upper arm itself is in)."""
+    def elbow_clear(self, shoulder_rad: float, target_rad) -> float:
+        """The elbow angle nearest its target (``target_rad``: the setpoint's (shoulder,
+        elbow)) at which, with the shoulder at ``shoulder_rad``, the arm keeps half the
+        clearance. The target itself when it does; when the setpoint itself does not (a path
+        that had to pass closer, where the shoulder's error is not what brings it near); or
+        when no angle within 60 deg does (the upper arm itself is in)."""
         space = self.forearm_space
-        if space.is_free((shoulder_rad, elbow_target_rad)):
+        elbow_target_rad = float(target_rad[1])
+        if space.is_free((shoulder_rad, elbow_target_rad)) or not space.is_free(target_rad):
             return elbow_target_rad
         either = np.stack([elbow_target_rad + ELBOW_STEPS_RAD,
                            elbow_target_rad - ELBOW_STEPS_RAD], axis=1).ravel()
