@@ -77,7 +77,8 @@ def main():
     planner = Planner(arm, config.load('planner')[1])
     keep_clear = SafetyRules.elbow_clear
     settings = [('elbow keeps clear', controller, keep_clear),
-                ('elbow on its setpoint', controller, lambda self, shoulder, elbow: elbow),
+                ('elbow on its setpoint', controller,
+                 lambda self, shoulder, target: float(target[1])),
                 ('+1 V braking reserve', dataclasses.replace(
                     controller,
                     feedback_voltage_reserve=controller.feedback_voltage_reserve + 1.0),
