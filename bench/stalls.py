@@ -11,10 +11,9 @@ periods) begins at every ``--periods``-th period of the move in turn, so that ev
 of it is stalled in one run. Per move and setting, the lowest point
 of either link over all those runs, and in how many runs a link went below the floor:
 
-- elbow keeps clear: as the controller runs (``SafetyRules.elbow_clear``);
-- elbow on its setpoint: the same with the elbow's target left as the trajectory says;
-- and with the feedback reserve on the braking side raised by 1 V: what braking headroom
-  buys instead, and what it costs in time.
+- as the controller runs;
+- with the feedback reserve on the braking side raised by 1 V: what braking headroom buys,
+  and what it costs in time.
 
     python bench/stalls.py [--periods 2]
 """
@@ -30,7 +29,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from arm_control import config  # noqa: E402
 from arm_control.control.closed_loop import ClosedLoop  # noqa: E402
 from arm_control.control.goals import GoalValidator  # noqa: E402
-from arm_control.control.safety import SafetyRules  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
 
@@ -75,22 +73,17 @@ def main():
     args = parser.parse_args()
     arm, controller = config.load('controller')
     planner = Planner(arm, config.load('planner')[1])
-    keep_clear = SafetyRules.elbow_clear
-    settings = [('elbow keeps clear', controller, keep_clear),
-                ('elbow on its setpoint', controller,
-                 lambda self, shoulder, target: float(target[1])),
+    settings = [('as it runs', controller),
                 ('+1 V braking reserve', dataclasses.replace(
                     controller,
-                    feedback_voltage_reserve=controller.feedback_voltage_reserve + 1.0),
-                 keep_clear)]
+                    feedback_voltage_reserve=controller.feedback_voltage_reserve + 1.0))]
     print(f'A stall of {args.periods} periods ({args.periods * controller.period_s * 1000:.0f} '
           'ms), each period of the move stalled in one run; in one process, simulated time.')
     print('| move | setting | move s (no stall) | lowest mm | runs below the floor |')
     print('|---|---|---|---|---|')
     for name, start_xy, branch, goal_xy in MOVES:
         start_q = GoalValidator(arm).free_configurations(*start_xy)[branch]
-        for label, settings_controller, elbow_clear in settings:
-            SafetyRules.elbow_clear = elbow_clear
+        for label, settings_controller in settings:
             _, move_s = run(arm, settings_controller, planner, start_q, goal_xy, None, 0)
             periods = int(round((move_s or MOVE_LIMIT_S) / controller.period_s))
             lows = [run(arm, settings_controller, planner, start_q, goal_xy, k,
@@ -98,7 +91,6 @@ def main():
             below = sum(low < 0.0 for low in lows)
             print(f'| {name} | {label} | {move_s or float("nan"):.2f} | {1000 * min(lows):.0f} | '
                   f'{below} of {len(lows)} |', flush=True)
-    SafetyRules.elbow_clear = keep_clear
 
 
 if __name__ == '__main__':

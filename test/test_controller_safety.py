@@ -10,9 +10,7 @@ import pytest
 
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
-from arm_control.control.goals import GoalValidator
 from arm_control.control.state_machine import ArmState, Trigger
-from arm_control.model.world import ForbiddenSpace
 
 
 # --- safety ------------------------------------------------------------------------------
@@ -184,27 +182,6 @@ def test_found_on_the_floor_line_the_arm_is_lifted_clear_before_it_is_held(
     rig.run(1.0)
     assert np.max(np.abs(rig.true_q - lifted)) < 0.3 * DEG
     assert rig.core.state == ArmState.WAITING and rig.lowest_m == 0.0
-
-
-def test_the_elbow_folds_the_forearm_clear_of_a_shoulder_that_ran_low(arm, controller_config):
-    """At full extension near the floor, (1.6, 0.12) m with the elbow down, a shoulder 14 deg
-    below its setpoint (braked at its current limit, it could not stop in time) would put the
-    forearm in the floor: the elbow's target becomes the nearest angle that keeps half the
-    clearance. On its setpoint, or on a setpoint that is itself that near, the target stays."""
-    rules = ArmController(arm, controller_config).safety
-    goal = min(GoalValidator(arm).free_configurations(1.6, 0.12), key=lambda q: q[1])
-    assert rules.elbow_clear(goal[0], goal) == goal[1]
-    space = ForbiddenSpace(arm, arm.world.clearance_rad / 2.0)
-    shoulder = goal[0] - 14 * DEG
-    assert not space.is_free((shoulder, goal[1]))
-    elbow = rules.elbow_clear(shoulder, goal)
-    assert space.is_free((shoulder, elbow))
-    assert elbow > goal[1]                                    # folded up, out of the floor
-    closer = elbow - np.sign(elbow - goal[1]) * 1 * DEG
-    assert not space.is_free((shoulder, closer))
-    # A setpoint that itself passes that near (a path with no room): it is followed as is.
-    tight = np.array([shoulder, goal[1]])
-    assert rules.elbow_clear(shoulder - 1 * DEG, tight) == tight[1]
 
 
 def test_disable_sends_zero_and_enable_takes_the_arm_back_to_where_it_was_held(

@@ -293,8 +293,7 @@ class ArmController:
         bus = min(self.sensing.battery_voltage, self.arm.battery.nominal_voltage)
         feedforward = self.feedforward.step(now_s, self._reference, battery_voltage=bus)
         reference, estimate = self.feedforward.state, self.sensing.state
-        target = np.array([reference[0], self.safety.elbow_clear(estimate[0], reference[:2])])
-        error = target - estimate[:2]
+        error = reference[:2] - estimate[:2]
         feedback = np.array(self.pid.update(error, reference[2:] - estimate[2:], dt_s,
                                             self.saturated))
         total = feedforward + feedback

@@ -11,14 +11,6 @@ goes back to where it was last commanded when that is near and the way there is 
 that bursts of cuts cannot ratchet it down; otherwise it holds where it is, lifted clear by
 the shortest straight move first if it sagged within ``world.clearance_rad`` of forbidden
 space. Either move is a ``StraightMove`` at what the motors surely give: no timing solve.
-
-While it tracks, the elbow keeps the forearm clear of where the shoulder really is. A
-time-optimal move brakes the shoulder at its current limit, so a shoulder that runs ahead
-(the controller's own stall of 60 ms, with the last volts still driving) cannot be caught,
-and near the floor it would put the forearm 0.2-0.3 m into it. The elbow then has volts to
-spare: where the setpoint keeps half the clearance, the elbow's target is moved, for as
-long as that lasts, to the nearest angle that keeps it with the shoulder as it is
-(``elbow_clear``).
 """
 
 import math
@@ -42,8 +34,6 @@ REJOIN_RAD, REJOIN_RAD_S = math.radians(5.0), 1.5
 # A hold is lifted clear of forbidden space only from this near it: deeper in, the way out
 # is the planner's.
 LIFT_REACH_RAD = 0.35
-# The elbow's target moves at most 60 deg to keep the forearm clear, in steps of a degree.
-ELBOW_STEPS_RAD = np.radians(np.arange(1.0, 61.0))
 
 
 class SafetyRules:
@@ -58,23 +48,6 @@ class SafetyRules:
                                               6.0 * j.potentiometer_noise_rad)
                                           for j in arm.joints])
         self.over_limit_since_s: Optional[float] = None
-        self.forearm_space = ForbiddenSpace(arm, arm.world.clearance_rad / 2.0)
-
-    def elbow_clear(self, shoulder_rad: float, target_rad) -> float:
-        """The elbow angle nearest its target (``target_rad``: the setpoint's (shoulder,
-        elbow)) at which, with the shoulder at ``shoulder_rad``, the arm keeps half the
-        clearance. The target itself when it does; when the setpoint itself does not (a path
-        that had to pass closer, where the shoulder's error is not what brings it near); or
-        when no angle within 60 deg does (the upper arm itself is in)."""
-        space = self.forearm_space
-        elbow_target_rad = float(target_rad[1])
-        if space.is_free((shoulder_rad, elbow_target_rad)) or not space.is_free(target_rad):
-            return elbow_target_rad
-        either = np.stack([elbow_target_rad + ELBOW_STEPS_RAD,
-                           elbow_target_rad - ELBOW_STEPS_RAD], axis=1).ravel()
-        free = np.asarray(space.is_free(np.stack([np.full(len(either), shoulder_rad), either],
-                                                 axis=1)), dtype=bool)
-        return float(either[np.argmax(free)]) if np.any(free) else elbow_target_rad
 
     def past_a_limit(self, potentiometer_rad) -> Optional[str]:
         """Why a joint reads past its hard stop (beyond noise), or None."""
