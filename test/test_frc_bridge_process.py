@@ -214,8 +214,8 @@ def test_the_robot_s_readings_reach_ros_stamped_and_consistent(rig):
     """Held still, the effort the bridge derives from the robot's motor currents is the
     torque that holds the arm against gravity; the battery is being discharged."""
     since = time.monotonic()
-    assert rig.spin_until(lambda: len([1 for t, _ in rig.heard['battery'] if t > since]) > 10,
-                          5.0)
+    assert rig.spin_until(lambda: len([1 for t, _ in rig.heard['battery'] if t > since]) > 100,
+                          10.0)
     states = [m for t, m in rig.heard['joint_states'] if t > since]
     assert all(list(m.name) == ['shoulder', 'elbow'] for m in states)
     stamps = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in states]
@@ -226,8 +226,8 @@ def test_the_robot_s_readings_reach_ros_stamped_and_consistent(rig):
     # At rest the motors' torque is gravity's. The median of the still samples (within 3
     # sigmas of the velocity noise): on a loaded machine a late command lets a loop or two
     # run at 0 V, and the arm sags and is taken back (effort 8 % above gravity, moving).
-    still = [m.effort for m in states[-50:] if np.max(np.abs(m.velocity)) < 0.06]
-    assert len(still) >= 10, f'{len(still)} still samples of the last 50'
+    still = [m.effort for m in states[-100:] if np.max(np.abs(m.velocity)) < 0.06]
+    assert len(still) >= 10, f'{len(still)} still samples of the last 100'
     effort = np.median(still, axis=0)
     assert effort == pytest.approx(gravity, rel=0.05, abs=2.0)
     battery = [m for t, m in rig.heard['battery'] if t > since][-1]
