@@ -50,6 +50,7 @@ import minimum_time  # noqa: E402
 import numpy as np  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from ros_harness import Probe, ros_domain  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from arm_control import config  # noqa: E402
@@ -182,9 +183,14 @@ def run(args) -> list:
             rig = ArmRig(domain, probe, Path(tempfile.mkdtemp(prefix='arm_bench_ros_')),
                          node_args)
             ros = RosMoves(rig, bool(args.sim_speed))
+            clock = []                              # (wall s, sim s) of each /clock
+            if args.sim_speed:
+                probe.node.create_subscription(Clock, '/clock', lambda m: clock.append(
+                    (time.monotonic(), m.clock.sec + 1e-9 * m.clock.nanosec)), 100)
             try:
                 rig.start_all()
                 rig.ready(90.0)
+                del clock[:]
                 for name, start_xy, goal_xy in moves:
                     for _ in range(args.repeats):
                         start_q = ros.go_to(start_xy)
@@ -195,6 +201,9 @@ def run(args) -> list:
                         print(f'  {name}: {result["outcome"]}, {fmt(result["ros_s"])} s through '
                               'ROS', file=sys.stderr, flush=True)
                 log_dir = rig.log_dir
+                if len(clock) > 1:      # in step with the controller: as fast as it answers
+                    (wall0, sim0), (wall1, sim1) = clock[0], clock[-1]
+                    args.clock_rate = (sim1 - sim0) / (wall1 - wall0)
             finally:
                 rig.close()
                 probe.close()
@@ -220,7 +229,8 @@ def run(args) -> list:
 def print_table(arm, rows, args, log_dir) -> None:
     conditions = ', '.join(filter(None, [
         'two busy loops beside it' if args.load else 'idle',
-        f'simulated time at {args.sim_speed:g}x' if args.sim_speed else 'real time',
+        f'simulated time at {args.sim_speed:g}x (its clock ran at '
+        f'{getattr(args, "clock_rate", math.nan):.2f}x)' if args.sim_speed else 'real time',
         f'{args.repeats} runs a move (the median)' if args.repeats > 1 else '']))
     print(f'\nMoves through ROS ({conditions}); node logs in {log_dir}\n')
     print('| move | ROS s | one process s | minimum s | ROS / min | one process / min | '

@@ -1,4 +1,4 @@
-"""The controller's own stall, at each moment of a move near the floor: how deep it goes.
+"""The controller's own stall, or a late command, near the floor: how deep the arm goes.
 
 A time-optimal move brakes the shoulder at its motors' current limit, so an arm that runs
 ahead of its setpoint cannot be braked harder. When the controller stalls, the motors go on
@@ -15,7 +15,13 @@ of either link over all those runs, and in how many runs a link went below the f
 - with the feedback reserve on the braking side raised by 1 V: what braking headroom buys,
   and what it costs in time.
 
+With ``--latency``, every command of the move instead reaches the motors that many ms
+late, at most a period (the one before holds meanwhile: a loaded machine's transport),
+at the braking reserve the controller had before (0.5 V), at the configured one, and
+0.5 V above it.
+
     python bench/stalls.py [--periods 2]
+    python bench/stalls.py --latency 0 5 10 15 20
 """
 
 import argparse
@@ -40,10 +46,31 @@ SETTLE_S = 0.5
 MOVE_LIMIT_S = 4.0
 
 
-def run(arm, controller, planner, start_q, goal_xy, stall_from, periods):
+def delay_commands(plant, latency_s: float) -> None:
+    """Each command reaches the plant's motors ``latency_s`` after it is sent (at most a
+    period); the one before holds meanwhile."""
+    set_voltage, advance = plant.set_voltage, plant.advance
+    pending = []
+
+    def arrives_later(voltage):
+        pending.append(voltage)
+
+    def advance_with_the_late_one(duration_s):
+        late_s = min(latency_s, duration_s)
+        advance(late_s)
+        while pending:
+            set_voltage(pending.pop(0))
+        advance(duration_s - late_s)
+    plant.set_voltage, plant.advance = arrives_later, advance_with_the_late_one
+
+
+def run(arm, controller, planner, start_q, goal_xy, stall_from, periods, latency_s=0.0):
     """(lowest point of either link (m, <= 0), time to holding (s)): the plant keeps its
-    last command for ``periods`` periods from the ``stall_from``-th command of the move."""
+    last command for ``periods`` periods from the ``stall_from``-th command of the move;
+    every command arrives ``latency_s`` late."""
     loop = ClosedLoop(arm, controller, planner=planner, start=tuple(start_q), seed=0)
+    if latency_s > 0.0:
+        delay_commands(loop.plant, latency_s)
     forbidden = ForbiddenSpace(arm)
     apply = loop.plant.set_voltage
     sent = [0]
@@ -70,9 +97,12 @@ def run(arm, controller, planner, start_q, goal_xy, stall_from, periods):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--periods', type=int, default=2, help='stall length in periods')
+    parser.add_argument('--latency', type=float, nargs='+', help='command latencies (ms)')
     args = parser.parse_args()
     arm, controller = config.load('controller')
     planner = Planner(arm, config.load('planner')[1])
+    if args.latency:
+        return latencies(arm, controller, planner, args.latency)
     settings = [('as it runs', controller),
                 ('+1 V braking reserve', dataclasses.replace(
                     controller,
@@ -91,6 +121,24 @@ def main():
             below = sum(low < 0.0 for low in lows)
             print(f'| {name} | {label} | {move_s or float("nan"):.2f} | {1000 * min(lows):.0f} | '
                   f'{below} of {len(lows)} |', flush=True)
+
+
+def latencies(arm, controller, planner, latencies_ms) -> None:
+    print('Every command of the move late by the latency; in one process, simulated time. '
+          'Each cell: the lowest point of either link (mm) / time to holding (s).')
+    print('| move | braking reserve V | ' + ' | '.join(f'{ms:g} ms' for ms in latencies_ms)
+          + ' |')
+    print('|---|---|' + '---|' * len(latencies_ms))
+    configured = controller.feedback_voltage_reserve
+    for name, start_xy, branch, goal_xy in MOVES:
+        start_q = GoalValidator(arm).free_configurations(*start_xy)[branch]
+        for reserve_v in sorted({0.5, configured, configured + 0.5}):
+            settings = dataclasses.replace(controller, feedback_voltage_reserve=reserve_v)
+            cells = []
+            for ms in latencies_ms:
+                low, move_s = run(arm, settings, planner, start_q, goal_xy, None, 0, ms / 1000)
+                cells.append(f'{1000 * low:.0f} / {move_s or float("nan"):.2f}')
+            print(f'| {name} | {reserve_v:g} | ' + ' | '.join(cells) + ' |', flush=True)
 
 
 if __name__ == '__main__':

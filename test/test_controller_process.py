@@ -55,7 +55,21 @@ def start_arm(launch, probe, *ros_args):
             np.max(np.abs(np.array(m.position) - start)) < math.radians(2.0) for m in recent)
     assert probe.spin_until(held_at_start, 10.0), 'the controller did not take over the arm'
     truth.clear()
+    probe.diagnostics = diagnostics
     return truth, states, events
+
+
+def worst_periods(diagnostics) -> dict:
+    """Each node's worst loop period (ms) per second, as its diagnostics reported them: what
+    a failure message needs to tell a stall from a bad plan."""
+    worst = {}
+    for message in diagnostics:
+        for status_ in message.status:
+            for value in status_.values:
+                if value.key in ('loop period worst (s)', 'worst period (s)') and \
+                        value.value != 'nan':
+                    worst.setdefault(status_.name, []).append(round(1000 * float(value.value)))
+    return worst
 
 
 def goal_publisher(probe):
@@ -117,7 +131,9 @@ def test_goals_reached_in_order_never_below_the_floor(launch, probe, arm):
     assert_each_goal_reached_and_still(goals, xy, qd, 0.031)
     assert np.linalg.norm(xy[-1] - goals[-1]) < 0.031
     lowest = ForbiddenSpace(arm).lowest_point_m(q)
-    assert np.min(lowest) >= 0.0, f'a link went {-np.min(lowest) * 1000:.1f} mm below the floor'
+    assert np.min(lowest) >= 0.0, (f'a link went {-np.min(lowest) * 1000:.1f} mm below the '
+                                   f'floor; worst periods (ms) per second: '
+                                   f'{worst_periods(probe.diagnostics)}')
     assert [s.data for s in states][-1] == 'holding'
     assert 'tracking' in [s.data for s in states]
 
