@@ -5,8 +5,9 @@ The planner's path is short, not fast: the fastest motion often folds the elbow 
 by Σₕ aₕ·sin(hπσ/L) on each joint, and a pattern search over the first ``_HARMONICS``
 harmonics times many shapes at once (``exact.fastest_speeds`` on a coarse grid, under the
 bus sag of the unbent path). A shape counts only when its samples are free and, where the
-planner's path has ``_ROOM_M`` of room to spare around forbidden regions, keep that room (for
-tracking errors); the one chosen is then checked at the world's check step.
+planner's path has room to spare (``_ROOM_M`` around forbidden regions, ``_ROOM_RAD`` from the
+elbow's tightest fold), keep that room (for tracking errors); the one chosen is then checked
+at the world's check step.
 """
 
 import dataclasses
@@ -29,8 +30,9 @@ from arm_control.model.world import ForbiddenSpace
 # Harmonics per joint, the first batch's grid (per joint, odd: it holds 0) and span (± this
 # times the path length), the refinement steps (times the length) and how many of them try
 # every combination (the rest one amplitude at a time), the stages the shapes are timed on,
-# the room kept, the least gain worth a new shape, and the shortest move worth the search
-# (on a shorter one a few percent is less than the search's own time).
+# the room kept (around regions, and from the elbow's tightest fold), the least gain worth
+# a new shape, and the shortest move worth the search (on a shorter one a few percent is
+# less than the search's own time).
 _HARMONICS = 2
 _GRID = 5
 _SPAN = 0.35
@@ -38,14 +40,17 @@ _STEPS = (0.06, 0.03, 0.015)
 _FULL_STEPS = 3
 SEARCH_STAGES = 20
 _ROOM_M = 0.03
+_ROOM_RAD = 0.035
 _MIN_GAIN = 0.01
 _MIN_DURATION_S = 0.25
 
 
 @functools.lru_cache(maxsize=8)
 def _with_room(arm: ArmConfig) -> ForbiddenSpace:
-    """Forbidden space with every region grown by ``_ROOM_M`` more."""
-    world = dataclasses.replace(arm.world, clearance_m=arm.world.clearance_m + _ROOM_M)
+    """Forbidden space with every region grown by ``_ROOM_M`` more, and the elbow's tightest
+    fold ``_ROOM_RAD`` wider: a bend folding it to the limit had the arm 0.6° past it."""
+    world = dataclasses.replace(arm.world, clearance_m=arm.world.clearance_m + _ROOM_M,
+                                min_elbow_fold_rad=arm.world.min_elbow_fold_rad + _ROOM_RAD)
     return ForbiddenSpace(dataclasses.replace(arm, world=world))
 
 
