@@ -9,6 +9,7 @@ longer than 30 ms heard here on ``voltage_command`` and on the true state during
 
     python bench/repeat_move.py                       # back -> low front, 12 runs
     python bench/repeat_move.py --start -1.5 0.15 --goal 1.5 0.15 --runs 20
+    python bench/repeat_move.py --param feedback_voltage_reserve:=0.5   # the controller's
 
 Needs the package built and sourced. Not a test: it asserts nothing and prints a table.
 """
@@ -45,10 +46,14 @@ def main():
     parser.add_argument('--goal', type=float, nargs=2, default=(1.6, 0.12))
     parser.add_argument('--runs', type=int, default=12)
     parser.add_argument('--domain', type=int, default=91)
+    parser.add_argument('--param', action='append', default=[],
+                        help="a controller parameter, 'name:=value' (repeatable)")
     args = parser.parse_args()
     forbidden = ForbiddenSpace(config.load('controller')[0])
     probe = Probe(args.domain, 'repeat_move')
-    rig = ArmRig(args.domain, probe, Path(tempfile.mkdtemp(prefix='arm_repeat_move_')))
+    controller_args = tuple(arg for param in args.param for arg in ('-p', param))
+    rig = ArmRig(args.domain, probe, Path(tempfile.mkdtemp(prefix='arm_repeat_move_')),
+                 {'controller': controller_args})
     moves = RosMoves(rig, False)
     heard = []
     probe.node.create_subscription(Float64MultiArray, '/voltage_command',
