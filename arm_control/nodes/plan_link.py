@@ -42,7 +42,6 @@ class PlanLink:
         self.client = node.create_client(GetPlan, 'plan_path')
         self.worker = PlanWorker(arm, config, self._timed)
         self.calls = {}                      # unanswered call -> (sent at, request, sends)
-        self.sends = {}                      # request id -> calls made for it so far
         self.answered_s = {}                 # request id -> when the planner answered
         self.found = False                   # the client reaches the planner
         self.heard = False                   # ... and the planner has answered since
@@ -61,7 +60,7 @@ class PlanLink:
             if now - sent_s > 2.0 * self.planner_timeout_s:
                 self._forget(future)
             elif self.found and not self.heard and now - sent_s > RESEND_AFTER_S \
-                    and sends == self.sends.get(request.request_id) and sends <= RESENDS:
+                    and sends == self._sends(request) and sends <= RESENDS:
                 self._call(request, sends + 1)
         return self.found and self.worker.ready.is_set()
 
@@ -77,14 +76,16 @@ class PlanLink:
         message.goal = messages.pose_stamped(*request.goal.xy, 0.0, header)
         future = self.client.call_async(message)
         self.calls[future] = (time.monotonic(), request, sends)
-        self.sends[request.request_id] = sends
         future.add_done_callback(lambda done, r=request: self._answered(r, done))
+
+    def _sends(self, request) -> int:
+        """How many calls the open ones for ``request`` make: the latest one's count."""
+        return max(sends for _, open_request, sends in self.calls.values()
+                   if open_request.request_id == request.request_id)
 
     def _forget(self, future) -> None:
         self.client.remove_pending_request(future)
-        _, request, _ = self.calls.pop(future)
-        if not any(call[1].request_id == request.request_id for call in self.calls.values()):
-            self.sends.pop(request.request_id, None)
+        del self.calls[future]
 
     def _timed(self, timed) -> None:
         """From the worker: stamped with when the planner answered and when it came back."""
@@ -93,8 +94,7 @@ class PlanLink:
 
     def _answered(self, request, future) -> None:
         """The planner's path as joint waypoints, to the worker for timing."""
-        if self.calls.pop(future, None) is None or \
-                self.sends.pop(request.request_id, None) is None:
+        if self.calls.pop(future, None) is None:
             return                                  # forgotten, or answered already
         for other in [f for f, call in self.calls.items()
                       if call[1].request_id == request.request_id]:
