@@ -173,7 +173,8 @@ def test_services_estop_reset_cancel_enable(launch, probe, arm):
     bad_states = probe.node.create_publisher(JointState, '/joint_states', 10)
     bad_driver = probe.node.create_publisher(TwistStamped, '/driver_velocity', COMMANDS)
     presets = probe.node.create_publisher(String, '/goal_preset', COMMANDS)
-    assert probe.spin_until(lambda: bad_driver.get_subscription_count() > 0
+    assert probe.spin_until(lambda: bad_states.get_subscription_count() > 0
+                            and bad_driver.get_subscription_count() > 0
                             and presets.get_subscription_count() > 0, 10.0)
     bad_states.publish(JointState(name=['wrist'], position=[math.nan]))
     twist = TwistStamped()
@@ -184,7 +185,8 @@ def test_services_estop_reset_cancel_enable(launch, probe, arm):
     assert probe.spin_until(lambda: {c for _, c, _ in said(events, 'goal_rejected')} >=
                             {'no such preset', 'not finite'}, 5.0)
     assert probe.processes['controller'].alive()
-    assert 'ignored joint_states' in probe.processes['controller'].output()
+    assert probe.spin_until(
+        lambda: 'ignored joint_states' in probe.processes['controller'].output(), 5.0)
 
     voltages = probe.collect(Float64MultiArray, '/voltage_command', COMMANDS)
     assert probe.spin_until(lambda: len(voltages) > 10, 5.0)
