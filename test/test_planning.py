@@ -207,3 +207,28 @@ def test_plan_to_a_wrapped_goal_takes_it_into_the_joint_travel(frc):
 
 
 # Optimality against brute force on small grids
+
+
+def test_paths_keep_the_clearance_where_one_can(frc, seed_planner):
+    """Between presets (each held within the clearance), and from low near the floor to full
+    extension low, the whole path keeps the clearance on both joints: an overshoot of up to
+    the clearance then stays out of forbidden space."""
+    for planner, moves in (
+            (frc, [(a, b) for a in presets(frc).values() for b in presets(frc).values()]),
+            (seed_planner, [((0.6, 0.1), (1.75, 0.1)), ((-1.5, 0.15), (1.5, 0.15))])):
+        clear = planner.clear.forbidden
+        for start_xy, goal_xy in moves:
+            start = next(q for q in planner.kinematics.inverse(*start_xy)
+                         if clear.is_free(planner._in_travel(q)))
+            plan = planner.plan(start, goal_xy)
+            assert_free_path(planner, plan)
+            assert clear.path_is_free(plan.waypoints_rad, CHECK_STEP_RAD), (start_xy, goal_xy)
+
+
+def test_a_goal_inside_the_clearance_is_still_planned_to_in_free_space(seed_planner):
+    """No path keeps the clearance to a goal within it: the free one is the answer."""
+    planner = seed_planner
+    goal = np.array([math.radians(1.0), math.radians(5.0)])      # 1° above the floor
+    assert planner.forbidden.is_free(goal) and not planner.clear.forbidden.is_free(goal)
+    plan = planner.plan_to_configuration([math.radians(90), math.radians(-90)], goal)
+    assert_free_path(planner, plan, goal=goal)

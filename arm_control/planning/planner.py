@@ -83,28 +83,42 @@ def _degrees(q) -> str:
 
 
 class Planner:
-    """Plans on one arm's configuration space; the grid is built once, here."""
+    """Plans on one arm's configuration space; the grid is built once, here.
 
-    def __init__(self, arm: ArmConfig, config: PlannerConfig, *, search: str = 'scipy'):
+    Paths keep ``world.clearance_rad`` from forbidden space on both joints wherever such a
+    path exists from a free start, and are merely free otherwise. A path in free space grazes
+    forbidden space where that is shorter, and the overshoot of a late command goes in:
+    "floor → full extension, low" went 19-43 mm into the floor with every command 10-20 ms
+    late, and touches nothing planned in the clearance (``bench/stalls.py --latency``).
+    ``forbidden``, ``grid`` and ``trees`` are free space's; ``clear`` plans in the clearance."""
+
+    def __init__(self, arm: ArmConfig, config: PlannerConfig, *, search: str = 'scipy',
+                 margin_rad: float | None = None):
         self.arm = arm
         self.config = config
         if search not in ('scipy', 'heapq'):
             raise ValueError(f"search = {search!r}: expected 'scipy' or 'heapq'")
         self.search = search                       # 'heapq': the plain one, for comparison
         self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
-        self.forbidden = ForbiddenSpace(arm)
+        self.forbidden = ForbiddenSpace(arm, margin_rad or 0.0)
         self.grid = ConfigurationGrid(self.forbidden, config.grid_resolution_rad,
                                       arm.world.check_step_rad)
         self.trees = GoalTrees(self.grid)
+        clearance_rad = arm.world.clearance_rad
+        self.clear = Planner(arm, config, search=search, margin_rad=clearance_rad) \
+            if margin_rad is None and clearance_rad > 0.0 else None
 
     # Public
 
     def plan(self, start_q, goal_xy) -> Plan:
         """From ``start_q`` to the point ``goal_xy`` (arm_base, m) on either IK branch;
-        the branch with the cheaper path wins."""
+        the branch with the cheaper path wins (in the clearance where there is a path)."""
         start = self._start(start_q)
         if isinstance(start, Plan):
             return start
+        clear = self._clear_plans(start, lambda planner: [planner.plan(start, goal_xy)])
+        if clear[0] is not None:
+            return clear[0]
         goal_xy = np.asarray(goal_xy, dtype=float).ravel()
         if goal_xy.shape != (2,) or not np.all(np.isfinite(goal_xy)):
             return Plan.failure(f'the goal point must be two finite numbers (x, y), '
@@ -131,10 +145,28 @@ class Planner:
 
     def plan_to_configurations(self, start_q, goals_q) -> list[Plan]:
         """``plan_to_configuration`` to each of ``goals_q`` (e.g. a goal's elbow branches):
-        one grid search serves them all."""
+        one grid search serves them all (one more for those with no path in the clearance)."""
         start = self._start(start_q)
         if isinstance(start, Plan):
             return [start] * len(goals_q)
+        plans = self._clear_plans(
+            start, lambda planner: planner.plan_to_configurations(start, goals_q), len(goals_q))
+        failed = [k for k, plan in enumerate(plans) if plan is None]
+        if failed:
+            for k, plan in zip(failed, self._plans_to(start, [goals_q[k] for k in failed])):
+                plans[k] = plan
+        return plans
+
+    def _clear_plans(self, start, plan_with, count: int = 1) -> list:
+        """``plan_with(self.clear)`` from a free start: each plan found in the clearance that
+        is free in free space too (a start inside the clearance first takes the shortest way
+        out of it, unchecked there), None in place of the others."""
+        if self.clear is None or not self.forbidden.is_free(start):
+            return [None] * count
+        return [plan if plan.ok and self.forbidden.path_is_free(plan.waypoints_rad) else None
+                for plan in plan_with(self.clear)]
+
+    def _plans_to(self, start, goals_q) -> list[Plan]:
         plans, goals, where = [], [], []
         for goal_q in goals_q:
             goal_q = np.asarray(goal_q, dtype=float).ravel()
@@ -157,7 +189,10 @@ class Planner:
     def prepare(self, goal_q) -> bool:
         """Build the shortest-path tree toward the configuration ``goal_q`` (a preset's
         branch: ``trees``), so that plans to it need no search; False when it is forbidden
-        or already prepared."""
+        or already prepared. Only in the clearance where there is one: plans are made there
+        but for the few that cannot be."""
+        if self.clear is not None:
+            return self.clear.prepare(goal_q)
         goal, why = self._goal(np.asarray(goal_q, dtype=float).ravel())
         if why is not None or goal in self.trees:
             return False
