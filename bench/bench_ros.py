@@ -204,6 +204,9 @@ def run(args) -> list:
                 if len(clock) > 1:      # in step with the controller: as fast as it answers
                     (wall0, sim0), (wall1, sim1) = clock[0], clock[-1]
                     args.clock_rate = (sim1 - sim0) / (wall1 - wall0)
+                    sim = rig.node_diagnostics('/sim')
+                    args.late_commands = sim[-1]['commands late for their period'] \
+                        if sim else '?'
             finally:
                 rig.close()
                 probe.close()
@@ -230,7 +233,9 @@ def print_table(arm, rows, args, log_dir) -> None:
     conditions = ', '.join(filter(None, [
         'two busy loops beside it' if args.load else 'idle',
         f'simulated time at {args.sim_speed:g}x (its clock ran at '
-        f'{getattr(args, "clock_rate", math.nan):.2f}x)' if args.sim_speed else 'real time',
+        f'{getattr(args, "clock_rate", math.nan):.2f}x, and '
+        f'{getattr(args, "late_commands", "?")} commands came late for their period)'
+        if args.sim_speed else 'real time',
         f'{args.repeats} runs a move (the median)' if args.repeats > 1 else '']))
     print(f'\nMoves through ROS ({conditions}); node logs in {log_dir}\n')
     print('| move | ROS s | one process s | minimum s | ROS / min | one process / min | '

@@ -22,11 +22,16 @@ physics one period per tick of a wall-clock timer ``sim_time_factor`` times fast
 time; every other node runs with ``use_sim_time`` and follows it. It moves in step with the
 controller: once commanded, a period begins only when the command for the last one has come
 (or ``LOCKSTEP_WAIT_S`` of real time has passed), so a slow or paused process slows time
-down instead of leaving the arm at 0 V.
+down instead of leaving the arm at 0 V. A command answers the period whose reading was out
+before it was sent (its DDS source timestamp, on the one host's clock): one sent earlier is
+late, for an earlier reading. It is applied, as a late command would be, but the period
+still waits for its own. Counted as the answer, one late command (the first, sent while the
+sim ran ahead of the controller) left every later one a period late, for good.
 """
 
 import math
 import sys
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.clock import Clock, ClockType
@@ -72,6 +77,8 @@ class SimNode(Node):
         self.brownouts_last_second = []
         self.periods_s, self.last_step_s = [], self.now_s()
         self.commanded_this_period = False
+        self.reading_sent_ns = 0                  # system time the last reading went out
+        self.late_commands = 0                    # sent before the period's reading
         self.period_began_wall_s = self.wall_clock.now().nanoseconds * 1e-9
 
         self.joint_states_pub = self.create_publisher(JointState, 'joint_states', STATE_STREAM)
@@ -124,7 +131,7 @@ class SimNode(Node):
         steps = math.floor(behind_s / self.plant.physics_step_s + 1e-9)
         self.plant.advance(steps * self.plant.physics_step_s)
 
-    def on_voltage(self, msg: Float64MultiArray) -> None:
+    def on_voltage(self, msg: Float64MultiArray, info: dict) -> None:
         voltage = list(msg.data)
         if len(voltage) != 2 or not messages.finite(voltage):
             self.commands_rejected += 1
@@ -137,7 +144,10 @@ class SimNode(Node):
         self.catch_up(now)
         self.plant.set_voltage(voltage)
         self.last_command_s = now
-        self.commanded_this_period = True
+        if self.simulated_time and info['source_timestamp'] < self.reading_sent_ns:
+            self.late_commands += 1
+        else:
+            self.commanded_this_period = True
         if self.plant.resting:
             self.plant.release()
             self.get_logger().info('first voltage command: the arm leaves its rest')
@@ -196,6 +206,7 @@ class SimNode(Node):
             self.plant.set_voltage((0.0, 0.0))
         self.catch_up(now)
         self.say_brownouts()
+        self.reading_sent_ns = time.time_ns()
         self.publish(self.plant.read())
         if self.simulated_time:     # after the reading: the controller's tick then finds it
             self.clock_pub.publish(ClockMessage(clock=self.stamp()))
@@ -257,6 +268,7 @@ class SimNode(Node):
         diagnostic.status = [status(self, level, message, {
             'mean period (s)': f'{stats["mean"]:.4f}', 'worst period (s)': f'{stats["worst"]:.4f}',
             'commands rejected': self.commands_rejected,
+            'commands late for their period': self.late_commands,
             'commanded voltage (V)': list(self.plant.command),
             'applied voltage (V)': [round(v, 3) for v in power.applied_v],
             'bus voltage (V)': f'{power.bus_voltage:.2f}',
