@@ -123,7 +123,7 @@ class GoalRunner:
         new plan starts where it will be."""
         self.refinable = None
         if lead_s is None:
-            lead_s = PREEMPT_LEAD_S * self.plans.clock_rate
+            lead_s = PREEMPT_LEAD_S
         start_time = now_s + lead_s
         timeline = self.setpoints.timeline
         if timeline.moving_at(start_time):

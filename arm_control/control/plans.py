@@ -55,7 +55,6 @@ class PlanRequest:
     start_time_s: Optional[float]
     sent_time_s: float
     lead_s: float = 0.1
-    clock_rate: float = 1.0          # the clock's seconds per wall second (sim time at 5x: 5)
 
 
 @dataclass(frozen=True)
@@ -244,14 +243,10 @@ class BranchRanking:
 
 class PlanHandoff:
     """The goal being planned: its request, when it must be answered, and what an answer
-    means for the arm. Planning takes wall time: with a clock ``clock_rate`` times faster
-    (the sim at 5x), the planner timeout and the lead of a plan from a moving start are as
-    many times longer on it, at the rate known when they are checked (a sim is slow at
-    first, while the controller starts)."""
+    means for the arm."""
 
     def __init__(self, planner_timeout_s: float):
         self.planner_timeout_s = planner_timeout_s
-        self.clock_rate = 1.0
         self.pending: Optional[PlanRequest] = None
         self._outbox: list[PlanRequest] = []
         self._next_id = 1
@@ -264,13 +259,13 @@ class PlanHandoff:
 
     @property
     def deadline_s(self) -> float:
-        return self.started_s + self.planner_timeout_s * self.clock_rate
+        return self.started_s + self.planner_timeout_s
 
     def ask(self, now_s: float, goal: Goal, start_q, start_velocity_rad_s,
             start_time_s: Optional[float], lead_s: float) -> None:
         request = PlanRequest(self._next_id, goal, (float(start_q[0]), float(start_q[1])),
                               tuple(float(v) for v in start_velocity_rad_s), start_time_s,
-                              now_s, lead_s, self.clock_rate)
+                              now_s, lead_s)
         self._next_id += 1
         self.pending, self._outbox = request, [request]
 

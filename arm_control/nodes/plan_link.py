@@ -64,6 +64,10 @@ class PlanLink:
                 self._call(request, sends + 1)
         return self.found and self.worker.ready.is_set()
 
+    def busy(self) -> bool:
+        """A plan is being made or timed (wall-time work): a call open, or the worker at it."""
+        return bool(self.calls) or self.worker.busy
+
     def send(self, requests) -> None:
         for request in requests:
             self._call(request, 1)

@@ -51,10 +51,9 @@ class HandoverClock:
     def __init__(self):
         self.ratio = FIRST_RATIO
 
-    def handover_s(self, quick_s: float, duration_s: float, clock_rate: float = 1.0) -> float:
-        """The hand-over for a quick timing that took ``quick_s`` (wall) and lasts
-        ``duration_s`` (on a clock ``clock_rate`` times faster than the wall's)."""
-        return min(max(MIN_HANDOVER_S, HANDOVER_SAFETY * self.ratio * quick_s * clock_rate),
+    def handover_s(self, quick_s: float, duration_s: float) -> float:
+        """The hand-over for a quick timing that took ``quick_s`` and lasts ``duration_s``."""
+        return min(max(MIN_HANDOVER_S, HANDOVER_SAFETY * self.ratio * quick_s),
                    HANDOVER_SHARE * duration_s)
 
     def seen(self, quick_s: float, refine_s: float) -> None:
@@ -63,8 +62,8 @@ class HandoverClock:
 
 def _serve(requests: Connection, results: Connection) -> None:
     """The worker: (arm, config) first, then time each (request, plan) that comes in and
-    send back the TimedPlan (from rest: the quick one, then its refinement); new (arm,
-    config) when the settings change at run time."""
+    send back the TimedPlan (from rest: the quick one, then its refinement), then the
+    request's id: done with it; new (arm, config) when the settings change at run time."""
     timer = None
     clock = HandoverClock()
     while True:
@@ -85,6 +84,7 @@ def _serve(requests: Connection, results: Connection) -> None:
                 _warm_up(timer, clock)
             continue
         _answer(timer, clock, *item, results.send, requests.poll)
+        results.send(item[0].request_id)
 
 
 def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, send,
@@ -103,8 +103,7 @@ def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, 
         return
     began = time.perf_counter()
     try:
-        refined = timer.refine(timed, clock.handover_s(quick_s, timed.trajectory.duration_s,
-                                                       request.clock_rate))
+        refined = timer.refine(timed, clock.handover_s(quick_s, timed.trajectory.duration_s))
     except Exception:                       # the quick trajectory carries on
         refined = None
     clock.seen(quick_s, time.perf_counter() - began)
@@ -130,7 +129,7 @@ def _warm_up(timer: PlanTimer, clock: HandoverClock) -> None:
 
 class PlanWorker:
     """The parent's side: ``submit`` a plan; ``on_timed(TimedPlan)`` is called from a thread
-    of its own when it is timed."""
+    of its own when it is timed; ``busy`` while a plan submitted is not done with."""
 
     def __init__(self, arm, config, on_timed):
         self.process = subprocess.Popen(
@@ -143,13 +142,19 @@ class PlanWorker:
         self.on_timed = on_timed
         self.ready = threading.Event()
         self._send_lock = threading.Lock()
+        self._open = 0                       # plans submitted, not yet done with
         self.retune(arm, config)
         self._thread = threading.Thread(target=self._receive, daemon=True, name='plan results')
         self._thread.start()
 
     def submit(self, request: PlanRequest, plan: PathPlan) -> None:
         with self._send_lock:
+            self._open += 1
             self._requests.send((request, plan))
+
+    @property
+    def busy(self) -> bool:
+        return self._open > 0
 
     def retune(self, arm, config) -> None:
         """Time the plans that come after this with these settings."""
@@ -164,6 +169,9 @@ class PlanWorker:
                 return
             if timed is None:
                 self.ready.set()
+            elif isinstance(timed, int):            # done with that request
+                with self._send_lock:
+                    self._open -= 1
             else:
                 self.on_timed(timed)
 

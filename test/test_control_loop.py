@@ -1,0 +1,63 @@
+"""The control loop in simulated time, in step with a sim that advances the clock one period
+after each answer, as the sim node does."""
+
+import threading
+import time
+from types import SimpleNamespace
+
+import numpy as np
+from rclpy.clock import ClockType
+
+from arm_control.nodes.control_loop import ControlLoop
+
+PERIOD_S = 0.02
+STEPS = 25
+
+
+class SimClock:
+    """A /clock that the test steps: ROS time, active."""
+
+    clock_type = ClockType.ROS_TIME
+    ros_time_is_active = True
+
+    def __init__(self):
+        self.nanoseconds = 0
+
+    def now(self):
+        return SimpleNamespace(nanoseconds=self.nanoseconds)
+
+
+def wall_gaps_of_ticks(working: bool) -> np.ndarray:
+    """Step the clock a period after each tick; the wall time between ticks (s)."""
+    clock, answered, walls = SimClock(), threading.Event(), []
+
+    def tick():
+        walls.append(time.monotonic())
+        answered.set()
+    loop = ControlLoop(clock, PERIOD_S, tick, working=lambda: working)
+    loop.start()
+    try:
+        for _ in range(STEPS):
+            assert answered.wait(5.0), 'the loop did not answer the step'
+            answered.clear()
+            clock.nanoseconds += round(PERIOD_S * 1e9)
+        assert answered.wait(5.0)
+    finally:
+        loop.stop()
+    return np.diff(walls)
+
+
+def test_while_a_plan_is_made_the_clock_keeps_to_real_time():
+    """Planning takes wall time: a step answered no sooner than a period of wall time after
+    the last keeps the sim, in step with the loop, at real time meanwhile."""
+    gaps = wall_gaps_of_ticks(working=True)
+    assert len(gaps) == STEPS
+    assert gaps.min() >= PERIOD_S
+
+
+def test_otherwise_each_step_is_answered_as_it_comes():
+    """With no wall-time work the sim runs as fast as the loop answers: faster than real
+    time (here by far; a loaded machine only narrows it)."""
+    gaps = wall_gaps_of_ticks(working=False)
+    assert len(gaps) == STEPS
+    assert gaps.sum() < 0.5 * STEPS * PERIOD_S
