@@ -182,13 +182,15 @@ def test_flood_of_goals_bounded_memory_and_loop_rate(rig):
     gaps_s = periods(heard)
     own_s = [float(d['loop period worst (s)']) for d in rig.controller_diagnostics(began)
              if d['loop period worst (s)'] != 'nan']
+    ages_ms = [float(d['joint_states age worst (ms)']) for d in rig.controller_diagnostics(began)]
     others = [e for e in rig.events_heard(began)
               if parse_event(e)[0] not in ('goal_queued', 'goal_rejected', 'goals_rejected')]
     print(f'flood: {sent} goals in {ended - began:.1f} s, {counted} taken by the controller, '
           f'{answered} answers heard; voltage_command at {rate_hz:.1f} Hz, period median '
           f'{1000 * np.median(gaps_s):.1f} ms, p99 {1000 * np.percentile(gaps_s, 99):.1f} ms, '
           f'worst {1000 * gaps_s.max():.1f} ms (the loop’s own worst '
-          f'{1000 * max(own_s):.0f} ms); controller RSS {baseline_mb:.1f} -> '
+          f'{1000 * max(own_s):.0f} ms); joint_states as old as {np.nanmax(ages_ms):.0f} ms '
+          f'when the controller took them; controller RSS {baseline_mb:.1f} -> '
           f'{max(memory):.1f} MB (last {memory[-1]:.1f}); '
           f"{sum(e.startswith('goal_reached') for e in others)} goals reached meanwhile; "
           f"other events: {[e for e in others if not e.startswith('goal_reached')]}")

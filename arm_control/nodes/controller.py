@@ -10,7 +10,8 @@ every period, ``arm_state`` (latched), ``~/setpoint``, ``~/estimate``, ``~/goal_
 (SetBool). Gains, reserves, tolerances, dwell and presets change at run time (``TUNABLE``).
 
 Three threads of work: the control loop (``ControlLoop``) steps the core and commands the
-motors; the executor takes messages and services; a worker process times plans
+motors; the executor takes messages and services (at ``EXECUTOR_PRIORITY``, below the loop);
+a worker process times plans
 (``PlanLink``). The core is shared under a lock held only for quick calls. 0 V on exit.
 """
 
@@ -37,7 +38,7 @@ from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health
 from arm_control.control.sensing import SensorReading
-from arm_control.nodes import messages
+from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
                                       LATCHED, loop_statistics, PLANNER_AVAILABLE, run,
                                       STATE_STREAM, status)
@@ -46,6 +47,12 @@ from arm_control.nodes.plan_link import PlanLink
 from arm_control.parameters import ParameterError
 
 PLANNER_POLL_S = 0.05             # how often to look whether the planner is there
+# The executor's thread (messages, services) at SCHED_FIFO this low when the loop is at real
+# time: above every normal process, below the loop. At normal priority, a busy machine
+# preempts it while it holds Python's lock, and the loop waits for the lock: in a flood of
+# goals under two busy loops the loop stalled for 149-396 ms (its own worst period) and the
+# arm was e-stopped on its tracking error in 2 of 3 runs; at FIFO 1, 27-166 ms, none of 6.
+EXECUTOR_PRIORITY = 1
 SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V command to arrive
 TUNABLE = ('shoulder_pid', 'elbow_pid', 'integrator_limit_v', 'feedback_voltage_reserve',
            'driving_voltage_reserve', 'goal_tolerance_rad', 'settled_velocity_rad_s',
@@ -75,6 +82,7 @@ class ControllerNode(Node):
         self.bad_inputs = self.bad_inputs_said = 0
         self.last_state = self.last_queue_version = None
         self.loop_periods_s, self.loop_compute_s, self.last_tick_s = [], [], None
+        self.reading_ages_s = []            # arrival minus stamp of each joint_states
         sys.setswitchinterval(0.001)   # another thread waits 1 ms for Python, not 5
 
         self.voltage_pub = self.create_publisher(Float64MultiArray, 'voltage_command', COMMANDS)
@@ -104,9 +112,11 @@ class ControllerNode(Node):
         self.create_timer(1.0, self.publish_diagnostics)
         priority = self.config.realtime_priority
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
-                                self.get_logger().warning, self.has_reading)
+                                self.get_logger().warning, self.has_reading, self.plans.busy)
         self.publish_outputs()
         self.loop.start()
+        if priority:         # this thread spins the executor (where refused, the loop said so)
+            realtime.raise_this_thread(EXECUTOR_PRIORITY)
         self.get_logger().info(f'controlling the arm at {self.config.loop_rate_hz:g} Hz'
                                f'{f" at real-time priority {priority}" if priority else ""}; '
                                'waiting for joint_states')
@@ -136,6 +146,9 @@ class ControllerNode(Node):
                                  f'{len(msg.position)} positions, {len(msg.velocity)} '
                                  'velocities')
         now = self.now_s()
+        age_s = now - messages.stamp_s(msg.header)
+        if math.isfinite(age_s):
+            self.reading_ages_s.append(age_s)
 
         def fresh(latest, missing):
             return latest[0] if latest is not None and \
@@ -234,7 +247,6 @@ class ControllerNode(Node):
         began, now = time.perf_counter(), self.now_s()
         reading, self.reading = self.reading, None
         with self.lock:
-            self.core.goals.plans.clock_rate = self.loop.clock_rate
             try:
                 voltage = self.core.step(now, *(reading or (None, None)))
             except Exception as error:              # a bug must stop the arm, not the node
@@ -297,6 +309,7 @@ class ControllerNode(Node):
     def publish_diagnostics(self) -> None:
         periods, self.loop_periods_s = self.loop_periods_s, []
         compute, self.loop_compute_s = self.loop_compute_s, []
+        ages, self.reading_ages_s = self.reading_ages_s, []
         stats = loop_statistics(periods, compute)
         malformed, self.bad_inputs_said = self.bad_inputs - self.bad_inputs_said, self.bad_inputs
         problems = [text for bad, text in (
@@ -310,6 +323,8 @@ class ControllerNode(Node):
             'loop period worst (s)': f'{stats["worst"]:.4f}',
             'compute per cycle median (ms)': f'{1000 * stats["compute median"]:.3f}',
             'compute per cycle worst (ms)': f'{1000 * stats["compute worst"]:.3f}',
+            # On one clock (one host, or sim time): how late the readings come to the loop.
+            'joint_states age worst (ms)': f'{1000 * max(ages, default=math.nan):.1f}',
             'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner),
             'loop scheduling': self.loop.priority_problem or (
                 f'SCHED_FIFO {self.loop.realtime_priority}' if self.loop.realtime_priority
