@@ -5,6 +5,7 @@ parallel runs on one machine never hear each other; discovery stays on localhost
 """
 
 import contextlib
+import ctypes
 import fcntl
 import os
 from pathlib import Path
@@ -22,6 +23,7 @@ PACKAGE = 'arm_control'
 # The probe and the processes started here use the nodes' transport (see DDS_TRANSPORT).
 os.environ.setdefault(*DDS_TRANSPORT)
 DOMAIN_IDS = range(1, 102)       # 0 is the default everyone shares; 101 is the last safe one
+PR_SET_PDEATHSIG = 1             # prctl(2)
 
 
 @contextlib.contextmanager
@@ -62,6 +64,13 @@ def ros_environment(domain: int) -> dict:
     return env
 
 
+def _end_with_parent() -> None:
+    """In the child before exec: SIGINT when the process that started it ends, however it
+    ends. A test run killed from outside had left its nodes running, loading the machine
+    under the next runs' measurements."""
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGINT)
+
+
 class NodeProcess:
     """An installed executable, ``ros2 run arm_control <name>`` style, in its own process."""
 
@@ -74,7 +83,8 @@ class NodeProcess:
         if ros_args:
             command += ['--ros-args', *ros_args]
         self.process = subprocess.Popen(command, env=ros_environment(domain), stdout=self.log,
-                                        stderr=subprocess.STDOUT, start_new_session=True)
+                                        stderr=subprocess.STDOUT, start_new_session=True,
+                                        preexec_fn=_end_with_parent)
 
     def output(self) -> str:
         if not self.log.closed:
