@@ -40,12 +40,22 @@ class ControlLoop:
         self.has_input, self.working = has_input, working
         self.realtime_priority, self.warn = realtime_priority, warn
         self.priority_problem = None
+        self.last_tick_s = None             # the clock's time at the last tick
         self._wake = threading.Event()
         self._stopping = False
         self._thread = threading.Thread(target=self._run, daemon=True, name='control loop')
 
     def now_s(self) -> float:
         return self.clock.now().nanoseconds * 1e-9
+
+    def next_command_s(self) -> float:
+        """When the next command will act: now in real time (a poke ticks at once); in
+        simulated time the next step, once this one is answered (the sim is on it)."""
+        now = self.now_s()
+        if self._simulated() and self.last_tick_s is not None \
+                and now <= self.last_tick_s + DUE_SLACK_S:
+            return self.last_tick_s + self.period_s
+        return now
 
     def start(self) -> None:
         self._thread.start()
@@ -87,7 +97,7 @@ class ControlLoop:
                 self._wake.clear()
                 if self._stopping:
                     return
-                last_tick_wall = wall
+                last_tick_wall, self.last_tick_s = wall, now
                 self.tick()
                 # On time: keep the phase. Poked, or a whole period late: a new phase. In
                 # simulated time the phase is the sim's steps: once per step, never twice for

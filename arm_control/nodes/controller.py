@@ -270,9 +270,10 @@ class ControllerNode(Node):
         self.loop_compute_s.append(time.perf_counter() - began)
 
     def on_timed_plan(self, timed) -> None:
-        """From the worker's result thread: the plan to the core, and the loop runs now."""
+        """From the worker's result thread: the plan to the core, from when the next command
+        acts (in simulated time the next step, if this one's went out), and the loop runs."""
         with self.lock:
-            self.core.on_timed_plan(self.now_s(), timed)
+            self.core.on_timed_plan(self.loop.next_command_s(), timed)
         self.loop.poke()
 
     # ------------------------------------------------------------------ outputs
