@@ -21,8 +21,8 @@ class SimClock:
     clock_type = ClockType.ROS_TIME
     ros_time_is_active = True
 
-    def __init__(self):
-        self.nanoseconds = 0
+    def __init__(self, started_s: float = 1.0):
+        self.nanoseconds = round(started_s * 1e9)      # 0: no /clock yet
 
     def now(self):
         return SimpleNamespace(nanoseconds=self.nanoseconds)
@@ -81,5 +81,22 @@ def test_a_plan_taken_after_the_steps_command_went_out_starts_at_the_next_step()
         assert answered.wait(5.0)
         time.sleep(0.05)
         assert loop.next_command_s() == pytest.approx(3.0 + 2 * PERIOD_S)
+    finally:
+        loop.stop()
+
+
+def test_nothing_is_answered_before_the_sims_clock_starts():
+    """A simulated clock reads 0 until the first /clock: no tick is stamped then."""
+    clock, ticks = SimClock(started_s=0.0), []
+    loop = ControlLoop(clock, PERIOD_S, lambda: ticks.append(clock.nanoseconds))
+    loop.start()
+    try:
+        time.sleep(0.1)
+        assert ticks == [] and not loop.started()
+        clock.nanoseconds = round(5.0e9)
+        deadline = time.monotonic() + 5.0
+        while not ticks and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert ticks == [round(5.0e9)]
     finally:
         loop.stop()

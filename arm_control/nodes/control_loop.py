@@ -48,6 +48,12 @@ class ControlLoop:
     def now_s(self) -> float:
         return self.clock.now().nanoseconds * 1e-9
 
+    def started(self) -> bool:
+        """The clock runs. With simulated time it reads 0 until the first /clock: a reading
+        or a tick stamped then, and the next an epoch later, once overflowed the filter's
+        prediction, and the controller never left ``no_sensors`` (seen under load)."""
+        return self.clock.now().nanoseconds > 0
+
     def next_command_s(self) -> float:
         """When the next command will act: now in real time (a poke ticks at once); in
         simulated time the next step, once this one is answered (the sim is on it)."""
@@ -82,6 +88,10 @@ class ControlLoop:
         waiting_since = None                # wall s a due simulated tick began to wait
         last_tick_wall = -float('inf')
         while not self._stopping:
+            if not self.started():
+                self._wake.wait(SIM_TIME_POLL_S)
+                due_s = self.now_s()
+                continue
             now, wall = self.now_s(), time.monotonic()
             poked = self._wake.is_set()
             due = now >= due_s - DUE_SLACK_S

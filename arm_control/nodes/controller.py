@@ -135,6 +135,8 @@ class ControllerNode(Node):
 
     @guarded
     def on_joint_states(self, msg: JointState) -> None:
+        if not self.loop.started():
+            return                                  # the sim's clock is not there yet
         position = messages.joint_pair(msg, 'position')
         velocity = messages.joint_pair(msg, 'velocity') or [math.nan, math.nan]
         top_speed = self.core.sensing.max_leap_speed_rad_s       # beyond what motors give
