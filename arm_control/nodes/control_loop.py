@@ -88,11 +88,10 @@ class ControlLoop:
         waiting_since = None                # wall s a due simulated tick began to wait
         last_tick_wall = -float('inf')
         while not self._stopping:
-            if not self.started():
-                self._wake.wait(SIM_TIME_POLL_S)
-                due_s = self.now_s()
-                continue
             now, wall = self.now_s(), time.monotonic()
+            if now <= 0.0:                  # simulated time before the first /clock
+                self._wake.wait(SIM_TIME_POLL_S)
+                continue
             poked = self._wake.is_set()
             due = now >= due_s - DUE_SLACK_S
             if not poked and due and self._simulated():

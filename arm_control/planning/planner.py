@@ -159,11 +159,14 @@ class Planner:
 
     def _clear_plans(self, start, plan_with, count: int = 1) -> list:
         """``plan_with(self.clear)`` from a free start: each plan found in the clearance that
-        is free in free space too (a start inside the clearance first takes the shortest way
-        out of it, unchecked there), None in place of the others."""
+        is free in free space too, None in place of the others. From a clear start that holds
+        by construction; from one inside the clearance the way out of it is unchecked there,
+        so it is checked here."""
         if self.clear is None or not self.forbidden.is_free(start):
             return [None] * count
-        return [plan if plan.ok and self.forbidden.path_is_free(plan.waypoints_rad) else None
+        clear_start = self.clear.forbidden.is_free(start)
+        return [plan if plan.ok and (clear_start or self.forbidden.path_is_free(
+                    plan.waypoints_rad)) else None
                 for plan in plan_with(self.clear)]
 
     def _plans_to(self, start, goals_q) -> list[Plan]:
