@@ -88,6 +88,13 @@ def take(trigger, rig, planner):
     core, state = rig.core, rig.core.state
     if trigger == Trigger.SENSORS_BACK:
         rig.step()
+    elif trigger == Trigger.SENSORS_BACK_HELD:                # a goal held, the sensors lost
+        core.submit_goal(rig.now, 0.85, 1.0)
+        rig.run(5.0, rig.in_state(ArmState.HOLDING))
+        rig.sensors_on = False
+        rig.run(0.3)
+        rig.sensors_on = True
+        rig.step()
     elif trigger == Trigger.SENSORS_LOST:
         rig.sensors_on = False
         rig.run(0.3)

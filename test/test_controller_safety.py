@@ -165,6 +165,27 @@ def test_stops_commanding_when_joint_states_stop_and_recovers(arm, controller_co
     assert not rig.core.pending_goals()
 
 
+def test_a_held_goal_is_held_again_when_the_joint_states_return(
+        arm, controller_config, planner):
+    """The goal reached, the joint states stop for a moment: 0 V, the arm sags. When they
+    return it goes back to the goal, and holds it: the state says holding, not waiting."""
+    rig = Rig(arm, controller_config, planner, seed=3)
+    rig.core.submit_goal(rig.now, 0.85, 1.0)
+    assert rig.run(5.0, rig.in_state(ArmState.HOLDING))
+    rig.run(0.5)
+    held = rig.true_q
+    rig.sensors_on = False
+    assert rig.run(1.0, rig.in_state(ArmState.NO_SENSORS))
+    rig.run(0.05)
+    assert np.max(np.abs(rig.true_q - held)) > 0.2 * DEG        # it sagged at 0 V
+    rig.sensors_on = True
+    rig.step()
+    assert rig.core.state == ArmState.HOLDING
+    rig.run(1.0)
+    assert np.max(np.abs(rig.true_q - held)) < 0.5 * DEG
+    assert rig.core.state == ArmState.HOLDING and rig.lowest_m == 0.0
+
+
 def test_found_on_the_floor_line_the_arm_is_lifted_clear_before_it_is_held(
         arm, controller_config, planner):
     """The forearm's tip 1 cm above the floor (as after sagging at 0 V): the hold taken when

@@ -49,13 +49,16 @@ def test_every_commanding_state_can_be_estopped_disabled_and_lose_its_sensors():
 
 
 def test_zero_volt_states_reach_a_commanding_state_only_by_an_explicit_trigger():
-    """Out of 0 V only through: sensors returning, reset, enable."""
+    """Out of 0 V only through: sensors returning, reset, enable; and then only to hold
+    (back at a goal it held, holding it)."""
     way_out = {trigger for (state, trigger), target in TRANSITIONS.items()
                if state in STOPPED and target in COMMANDING}
-    assert way_out == {Trigger.SENSORS_BACK, Trigger.RESET, Trigger.ENABLE}
+    assert way_out == {Trigger.SENSORS_BACK, Trigger.SENSORS_BACK_HELD, Trigger.RESET,
+                       Trigger.ENABLE}
     for (state, trigger), target in TRANSITIONS.items():
         if state in STOPPED and target in COMMANDING:
-            assert target == ArmState.WAITING            # ... and then only to hold
+            assert target == (ArmState.HOLDING if trigger == Trigger.SENSORS_BACK_HELD
+                              else ArmState.WAITING)
 
 
 def test_every_state_is_reachable_from_the_start():

@@ -51,9 +51,9 @@ class ClosedLoop:
         ``sensors_on`` is off)."""
         if reading is None and self.sensors_on:
             reading = self.plant.read()
-        before = self.core.state
+        reached = self.core.goals.counts['reached']
         voltage = self.core.step(self.now, reading)
-        if before != ArmState.HOLDING and self.core.state == ArmState.HOLDING:
+        if self.core.goals.counts['reached'] > reached:
             self.arrivals.append((self.core.goals.goal_q.copy(), self.true_q,
                                   np.array(self.plant.state[2:])))
         self.voltages.append(voltage)

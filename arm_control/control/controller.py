@@ -68,6 +68,7 @@ class ArmController:
         self.last_step_s: Optional[float] = None
         self.commanded_q: Optional[np.ndarray] = None    # the setpoint last commanded
         self.resume_motion = None                         # the last motion back after 0 V
+        self.held_when_lost: Optional[np.ndarray] = None  # the goal held as sensors went
         self.estop_holding = False                        # e-stopped, holding (not at 0 V)
         self.voltage = self.feedforward_v = self.feedback_v = np.zeros(2)
         self.saturated = (0, 0)
@@ -250,6 +251,7 @@ class ArmController:
         age_s = self.sensing.age_s(now_s)
         fresh = age_s + self.period_s <= self.config.joint_state_timeout_s
         if not fresh and self.machine.can(T.SENSORS_LOST):
+            self.held_when_lost = self.commanded_q if self.state == S.HOLDING else None
             self.goals.interrupt()                  # resumed when the sensors return
             self.machine.fire(T.SENSORS_LOST)
             self.goals.last_error = (f'no joint states for {age_s:.3f} s (limit '
@@ -259,9 +261,13 @@ class ArmController:
         if not fresh and self.estop_holding:
             self.estop(now_s, f'no joint states for {age_s:.3f} s while holding', cut_power=True)
         if fresh and self.state == S.NO_SENSORS:
-            self.machine.fire(T.SENSORS_BACK)
-            self._say(now_s, Kind.SENSORS_BACK, 'info', 'joint states arriving: '
-                      f'{self._resume(now_s, lost=self.setpoints.timeline.last)}')
+            what = self._resume(now_s, lost=self.setpoints.timeline.last)
+            held, self.held_when_lost = self.held_when_lost, None
+            back_to_goal = held is not None and np.allclose(self.resume_motion.final_q, held)
+            self.machine.fire(T.SENSORS_BACK_HELD if back_to_goal else T.SENSORS_BACK)
+            if back_to_goal:
+                self.goals.goal_q = held
+            self._say(now_s, Kind.SENSORS_BACK, 'info', f'joint states arriving: {what}')
         if self.state in STOPPED:
             self.sensing.jumped = False
             self.setpoints.prune(now_s)

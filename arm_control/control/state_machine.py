@@ -37,6 +37,7 @@ class ArmState(str, Enum):
 
 class Trigger(str, Enum):
     SENSORS_BACK = 'sensors_back'      # joint states (again) fresh
+    SENSORS_BACK_HELD = 'sensors_back_held'  # fresh again, and back to the goal it held
     SENSORS_LOST = 'sensors_lost'      # no joint states for joint_state_timeout_s
     GOAL = 'goal'                      # a goal becomes current: plan it
     PLAN_READY = 'plan_ready'          # a timed, checked trajectory is accepted
@@ -64,6 +65,7 @@ STOPPED = frozenset({S.NO_SENSORS, S.ESTOPPED, S.DISABLED})
 
 TRANSITIONS: dict[tuple[ArmState, Trigger], ArmState] = {
     (S.NO_SENSORS, T.SENSORS_BACK): S.WAITING,
+    (S.NO_SENSORS, T.SENSORS_BACK_HELD): S.HOLDING,
     (S.NO_SENSORS, T.CANCEL): S.NO_SENSORS,
     (S.NO_SENSORS, T.ESTOP): S.ESTOPPED,
     (S.NO_SENSORS, T.DISABLE): S.DISABLED,
