@@ -1,0 +1,123 @@
+"""How long one DDS write can block while other nodes join the graph: plain rclpy, none of
+arm_control's code.
+
+A publisher process writes five JointState topics at 50 Hz from a SCHED_FIFO thread (where
+allowed), a subscriber process reads them, and every 2 s a short-lived node joins the
+domain and leaves. The table gives, per QoS and load, how many writes (``publish`` calls)
+took over 20 ms and over 100 ms, and the longest. With Fast DDS a write sends in the
+caller's thread, and it waits for the participant's send resources while the discovery of a
+new participant holds them (eProsima/Fast-DDS#4026); rclpy holds Python's lock meanwhile, so
+the whole process waits. This is what stops the sim's readings and the controller's commands
+for 0.2-0.35 s when a node joins on a loaded machine.
+
+    python bench/dds_write_block.py                  # 60 s per row, four rows
+    python bench/dds_write_block.py --seconds 30
+"""
+
+import argparse
+import os
+from pathlib import Path
+import subprocess
+import sys
+import time
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import busy  # noqa: E402
+
+TOPICS = 5
+PERIOD_S = 0.02
+CHURN_EVERY_S = 2.0
+JOINER = 'import rclpy, time; rclpy.init(); node = rclpy.create_node("joiner"); time.sleep(1.5)'
+
+
+def qos(reliability: str):
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    return QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE
+                      if reliability == 'reliable' else ReliabilityPolicy.BEST_EFFORT)
+
+
+def publish(reliability: str, seconds: float) -> None:
+    """The writer: prints 'writes slow20 slow100 worst_ms'."""
+    import rclpy
+    from sensor_msgs.msg import JointState
+    rclpy.init()
+    node = rclpy.create_node('writer')
+    writers = [node.create_publisher(JointState, f'block_test_{i}', qos(reliability))
+               for i in range(TOPICS)]
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
+    except OSError:
+        pass
+    message = JointState(name=['a', 'b'], position=[0.0, 0.0], velocity=[0.0, 0.0])
+    time.sleep(2.0)                                  # matched before counting
+    durations = []
+    due = time.monotonic()
+    end = due + seconds
+    while due < end:
+        due += PERIOD_S
+        time.sleep(max(0.0, due - time.monotonic()))
+        for writer in writers:
+            began = time.monotonic()
+            writer.publish(message)
+            durations.append(time.monotonic() - began)
+    print(len(durations), sum(d > 0.02 for d in durations), sum(d > 0.1 for d in durations),
+          f'{1000 * max(durations):.0f}')
+
+
+def subscribe(reliability: str, seconds: float) -> None:
+    import rclpy
+    from sensor_msgs.msg import JointState
+    rclpy.init()
+    node = rclpy.create_node('reader')
+    for i in range(TOPICS):
+        node.create_subscription(JointState, f'block_test_{i}', lambda _: None, qos(reliability))
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.1)
+
+
+def row(reliability: str, loaded: bool, seconds: float, domain: int) -> str:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               FASTDDS_BUILTIN_TRANSPORTS=os.environ.get('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4'))
+    me = [sys.executable, __file__]
+    load = busy.start(2, seconds + 30) if loaded else []
+    try:
+        reader = subprocess.Popen(me + ['--role', 'reader', reliability, str(seconds + 8)],
+                                  env=env)
+        writer = subprocess.Popen(me + ['--role', 'writer', reliability, str(seconds)],
+                                  env=env, stdout=subprocess.PIPE, text=True)
+        joins = 0
+        time.sleep(3.0)
+        while writer.poll() is None:
+            subprocess.Popen([sys.executable, '-c', JOINER], env=env)
+            joins += 1
+            time.sleep(CHURN_EVERY_S)
+        writes, slow20, slow100, worst = writer.stdout.read().split()
+        reader.wait()                                # it ends by itself, soon after
+    finally:
+        busy.stop(load)
+    load_name = 'two busy loops' if loaded else 'idle'
+    return (f'| {reliability.replace("_", " ")} | {load_name} | {joins} | {writes} | {slow20} '
+            f'| {slow100} | {worst} |')
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--seconds', type=float, default=60.0, help='per row')
+    parser.add_argument('--domain', type=int,
+                        default=int(os.environ.get('ROS_DOMAIN_ID', 0)))
+    parser.add_argument('--role', nargs=3, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.role:
+        role, reliability, seconds = args.role
+        (publish if role == 'writer' else subscribe)(reliability, float(seconds))
+        return
+    print('| QoS | load | nodes joined | writes | over 20 ms | over 100 ms | longest (ms) |')
+    print('|---|---|---|---|---|---|---|')
+    for loaded in (False, True):
+        for reliability in ('reliable', 'best_effort'):
+            print(row(reliability, loaded, args.seconds, args.domain), flush=True)
+
+
+if __name__ == '__main__':
+    main()
