@@ -286,8 +286,10 @@ class ArmRig:
     def true_q(self) -> np.ndarray:
         return np.array(self.truth.last().position)
 
-    def call(self, srv_type, name: str, request=None, timeout_s: float = 10.0):
-        return self.probe.call(srv_type, name, request or srv_type.Request(), timeout_s)
+    def call(self, srv_type, name: str, request=None, timeout_s: float = 10.0,
+             idempotent: bool = False):
+        return self.probe.call(srv_type, name, request or srv_type.Request(), timeout_s,
+                               idempotent)
 
     def send(self, x, y, z=0.0, frame='arm_base') -> None:
         self.goal_pub.publish(point(x, y, z, frame))

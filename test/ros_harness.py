@@ -24,6 +24,7 @@ PACKAGE = 'arm_control'
 os.environ.setdefault(*DDS_TRANSPORT)
 DOMAIN_IDS = range(1, 102)       # 0 is the default everyone shares; 101 is the last safe one
 PR_SET_PDEATHSIG = 1             # prctl(2)
+RESEND_S = 3.0                   # an idempotent call unanswered this long is sent again
 
 
 @contextlib.contextmanager
@@ -133,17 +134,30 @@ class Probe:
         self.node.create_subscription(msg_type, topic, received.append, qos)
         return received
 
-    def call(self, srv_type, name: str, request, timeout_s: float = 10.0):
+    def call(self, srv_type, name: str, request, timeout_s: float = 10.0,
+             idempotent: bool = False):
+        """One call on a new client. ``idempotent``: ask again every ``RESEND_S`` until
+        answered. A new client is ready once it sees the server, but the server may not see
+        the client yet: under load rmw_fastrtps then drops the answer ("failed to send
+        response (timeout)") and the call would wait out its timeout."""
         # The client goes with the call: the serving process keeps about 15 KB for every
         # client endpoint alive, so one left behind per call looks like a leak in it.
         client = self.node.create_client(srv_type, name)
         try:
             if not self.spin_until(client.service_is_ready, timeout_s):
                 raise TimeoutError(f'service {name} did not appear within {timeout_s} s')
-            future = client.call_async(request)
-            if not self.spin_until(future.done, timeout_s):
+            deadline = time.monotonic() + timeout_s
+            futures = [client.call_async(request)]
+            while not any(f.done() for f in futures) and time.monotonic() < deadline:
+                self.spin_until(lambda: any(f.done() for f in futures),
+                                min(RESEND_S, deadline - time.monotonic()) if idempotent
+                                else deadline - time.monotonic())
+                if idempotent and not any(f.done() for f in futures):
+                    futures.append(client.call_async(request))
+            done = [f for f in futures if f.done()]
+            if not done:
                 raise TimeoutError(f'service {name} did not answer within {timeout_s} s')
-            return future.result()
+            return done[0].result()
         finally:
             self.node.destroy_client(client)
 

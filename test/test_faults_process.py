@@ -109,8 +109,9 @@ def test_planner_slow_or_down_rejects_the_goal_in_bounded_time(rig):
     rig.start('planner')                                   # back: goals go again
     assert rig.wait_said('planner_available', 30.0, restarted), \
         rig.event_log(restarted)
-    rig.call(GetPlan, '/plan_path', timeout_s=30.0)       # answering (a busy machine may
-    assert rig.wait_still()                                # take a while to start it)
+    # Answering (a busy machine may take a while to start it).
+    rig.call(GetPlan, '/plan_path', timeout_s=30.0, idempotent=True)
+    assert rig.wait_still()
     # The controller's client sees the new server when the server may not yet see it (DDS
     # discovery is not symmetric in time): a first answer can be lost, and the goal is then
     # rejected with the reason. So a goal must go through within a few tries, each one
@@ -182,9 +183,18 @@ def test_controller_restart_mid_motion_comes_back_holding(rig):
     # hard stop): once held it is never pushed deeper, and the next goal takes it out.
     held_s = time.monotonic()
     held_depth_m = min(float(FORBIDDEN.lowest_point_m(held_q)), 0.0)
+    # And it works from there. Its first plan, from a start in forbidden space, with the
+    # new process's worker still warming up, can miss the 1 s planner timeout (seen idle:
+    # 0.47 s to plan, then the timing): the goal fails with the reason, and goes again.
     mark = time.monotonic()
-    rig.send(1.1, 0.9)                                     # and it works from there
-    assert rig.wait_said('goal_reached', 30.0, mark), rig.event_log(killed)
+    for _ in range(3):
+        tried = time.monotonic()
+        rig.send(1.1, 0.9)
+        assert rig.spin_until(lambda: rig.said('goal_reached', tried)
+                              or rig.said('goal_failed', tried), 30.0), rig.event_log(killed)
+        if rig.said('goal_reached', tried):
+            break
+    assert rig.said('goal_reached', mark), rig.event_log(killed)
     lowest_m = [float(FORBIDDEN.lowest_point_m(m.position)) for m in rig.truth.messages(held_s)]
     print(f'  lowest point at takeover {1000 * FORBIDDEN.lowest_point_m(taken_q):.0f} mm, '
           f'held {1000 * held_depth_m:.0f} mm, after it {1000 * min(lowest_m):.0f} mm')

@@ -57,7 +57,8 @@ def test_plans_over_the_top_and_latches_the_path_and_the_map(launch, probe, frc)
     high = pure.plan(START_Q, goals['high_score']).waypoints_rad[-1]
 
     response = probe.call(GetPlan, '/plan_path',
-                          request_from(kinematics, high, goals['back_score']), timeout_s=30.0)
+                          request_from(kinematics, high, goals['back_score']), timeout_s=30.0,
+                          idempotent=True)
     assert response.plan.header.frame_id == 'arm_base'
     poses = to_tuples(response.plan)
     assert len(poses) >= 3                                 # it cannot go straight
@@ -117,11 +118,11 @@ def test_bad_requests_get_an_empty_path_and_the_node_lives(launch, probe, frc):
     inside_robot = request_from(kinematics, START_Q, (0.60, -0.50))
     for bad in (wrong_frame, not_a_number, off_plane, not_the_arm, out_of_reach,
                 inside_robot):
-        response = probe.call(GetPlan, '/plan_path', bad, timeout_s=30.0)
+        response = probe.call(GetPlan, '/plan_path', bad, timeout_s=30.0, idempotent=True)
         assert len(response.plan.poses) == 0
         assert planner.alive()
 
-    response = probe.call(GetPlan, '/plan_path', good, timeout_s=30.0)
+    response = probe.call(GetPlan, '/plan_path', good, timeout_s=30.0, idempotent=True)
     assert len(response.plan.poses) >= 2
     output = planner.output()
     assert "frame 'map'" in output and 'rejected a plan_path request' in output
