@@ -190,7 +190,7 @@ def run(node_class, args=None) -> int:
     # Python's handler for SIGINT, marking the stop: rclpy's, installed by init, runs first
     # and then this one. A Ctrl-C that lands while rclpy converts a message taken surfaces
     # as "Unable to convert call argument" before rclpy has shut the context down, and the
-    # sim had exited on that with a traceback (2 of about 25 stops in one afternoon).
+    # sim had exited on that with a traceback (2 of 20 stops in one afternoon's probes).
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, interrupt)
     try:
