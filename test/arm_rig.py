@@ -227,6 +227,19 @@ class ArmRig:
                   count: int = 1) -> bool:
         return self.spin_until(lambda: len(self.said(kind, since_s)) >= count, timeout_s)
 
+    def reach_in_tries(self, x, y, tries: int = 3, timeout_s: float = 20.0) -> bool:
+        """Send the goal until it is reached, at most ``tries`` times; each try must end
+        reached or failed with its reason (never silent) within ``timeout_s``."""
+        for _ in range(tries):
+            tried = time.monotonic()
+            self.send(x, y)
+            assert self.spin_until(lambda: self.said('goal_reached', tried)
+                                   or self.said('goal_failed', tried), timeout_s), \
+                self.event_log(tried)
+            if self.said('goal_reached', tried):
+                return True
+        return False
+
     def said_at(self, kind: str, since_s=-math.inf) -> float:
         """When the first event of ``kind`` since ``since_s`` was heard."""
         return min(t for t, m in self.events if t >= since_s and parse_event(m.data)[0] == kind)

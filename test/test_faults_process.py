@@ -117,14 +117,7 @@ def test_planner_slow_or_down_rejects_the_goal_in_bounded_time(rig):
     # rejected with the reason. So a goal must go through within a few tries, each one
     # refused or reached, never blind.
     back = time.monotonic()
-    for _ in range(3):
-        tried = time.monotonic()
-        rig.send(0.9, 1.5)
-        assert rig.spin_until(lambda: rig.said('goal_reached', tried)
-                              or rig.said('goal_failed', tried), 20.0), rig.event_log(tried)
-        if rig.said('goal_reached', tried):
-            break
-    assert rig.said('goal_reached', back), rig.event_log(back)
+    assert rig.reach_in_tries(0.9, 1.5), rig.event_log(back)
 
 
 def test_sim_restart_mid_motion(rig):
@@ -187,14 +180,7 @@ def test_controller_restart_mid_motion_comes_back_holding(rig):
     # new process's worker still warming up, can miss the 1 s planner timeout (seen idle:
     # 0.47 s to plan, then the timing): the goal fails with the reason, and goes again.
     mark = time.monotonic()
-    for _ in range(3):
-        tried = time.monotonic()
-        rig.send(1.1, 0.9)
-        assert rig.spin_until(lambda: rig.said('goal_reached', tried)
-                              or rig.said('goal_failed', tried), 30.0), rig.event_log(killed)
-        if rig.said('goal_reached', tried):
-            break
-    assert rig.said('goal_reached', mark), rig.event_log(killed)
+    assert rig.reach_in_tries(1.1, 0.9, timeout_s=30.0), rig.event_log(killed)
     lowest_m = [float(FORBIDDEN.lowest_point_m(m.position)) for m in rig.truth.messages(held_s)]
     print(f'  lowest point at takeover {1000 * FORBIDDEN.lowest_point_m(taken_q):.0f} mm, '
           f'held {1000 * held_depth_m:.0f} mm, after it {1000 * min(lowest_m):.0f} mm')
