@@ -173,12 +173,28 @@ def _parameters_without_value(argv) -> list:
 _stopping = False                  # a SIGINT or SIGTERM came (``interrupt``)
 
 
-def interrupt(signum, frame):
-    """Ctrl-C, remembered: a node that cleans up itself (``on_shutdown``) takes SIGINT and
-    SIGTERM here; every other node takes SIGINT here before rclpy's handler."""
+def _stop_once() -> None:
+    """The stop is remembered, and later SIGINTs and SIGTERMs are ignored: a Ctrl-C under
+    ``ros2 launch`` comes twice (the terminal's to the process group, and launch's), and
+    the second one, landing in the clean-up or the interpreter's exit, had ended the sim
+    and the controller with a traceback or exit code -2 (launch still kills a node that
+    does not end)."""
     global _stopping
     _stopping = True
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, signal.SIG_IGN)
+
+
+def interrupt(signum, frame):
+    """SIGINT and SIGTERM as Ctrl-C, for a node that cleans up itself (``on_shutdown``)."""
+    _stop_once()
     raise KeyboardInterrupt
+
+
+def _note_stop(signum, frame):
+    """SIGINT, after rclpy's own handler has begun the shutdown: only remembered. Raising
+    here too would land wherever the main thread is by then, clean-up included."""
+    _stop_once()
 
 
 def run(node_class, args=None) -> int:
@@ -192,7 +208,7 @@ def run(node_class, args=None) -> int:
     # as "Unable to convert call argument" before rclpy has shut the context down, and the
     # sim had exited on that with a traceback (2 of 20 stops in one afternoon's probes).
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-        signal.signal(signal.SIGINT, interrupt)
+        signal.signal(signal.SIGINT, _note_stop)
     try:
         rclpy.init(args=args)
     except Exception as error:      # a parameter file rcl cannot parse, a bad --ros-args

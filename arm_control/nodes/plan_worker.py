@@ -18,6 +18,7 @@ caches warm.
 
 from multiprocessing.connection import Connection
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -193,6 +194,9 @@ class PlanWorker:
 
 def main() -> None:
     os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))    # whatever its parent had
+    # A Ctrl-C reaches the whole process group; the controller ends the worker itself (or
+    # its pipe closes when the controller dies), so the worker does not die mid-answer.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     requests = Connection(os.dup(0), writable=False)
     results = Connection(os.dup(1), readable=False)
     os.dup2(2, 1)                   # a stray print goes to the log, not into the results
