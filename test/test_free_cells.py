@@ -26,6 +26,21 @@ def test_every_configuration_in_a_cell_proved_free_is_free(files):
     assert np.count_nonzero(proved) > 0.8 * np.count_nonzero(exact)
 
 
+@pytest.mark.parametrize('files', [(), (FRC_ROBOT,)])
+def test_every_configuration_in_a_cell_proved_forbidden_is_forbidden(files):
+    arm = config.load('sim', *files)[0]
+    space = ForbiddenSpace(arm)
+    rng = np.random.default_rng(15)
+    low, high = space.limits[:, 0], space.limits[:, 1]
+    q = rng.uniform(low - 0.05, high + 0.05, (200_000, 2))
+    free, forbidden = free_cells(arm).lookup(q)
+    exact = space.within_limits(q) & ~space.collides(q)
+    assert not np.any(forbidden & exact) and not np.any(free & forbidden)
+    # ... and these cells pay too: most forbidden configurations in the travel are in one.
+    travel = np.all((q >= low) & (q <= high), axis=-1)
+    assert np.count_nonzero(forbidden) > 0.9 * np.count_nonzero(travel & ~exact)
+
+
 def test_checks_through_the_cells_give_the_exact_answer(arm):
     space = ForbiddenSpace(arm)
     rng = np.random.default_rng(12)
