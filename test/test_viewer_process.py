@@ -109,6 +109,9 @@ def test_recorder_writes_a_bag_that_rosbags_reads(launch, probe, tmp_path):
     assert probe.spin_until(lambda: voltage.get_subscription_count() >= 2
                             and battery.get_subscription_count() >= 1
                             and currents.get_subscription_count() >= 1, 20.0)
+    # Our side sees the recorder's reader; the recorder may not see our writer yet, and a
+    # reader drops a volatile sample from a writer it has not matched (24 of 25 once, idle).
+    probe.spin_for(1.0)
     start_ns = time.time_ns()
     for k in range(25):
         voltage.publish(Float64MultiArray(data=[1.5, -0.5]))
