@@ -16,6 +16,7 @@ import functools
 import math
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from arm_control.config import ArmConfig
 
@@ -102,13 +103,10 @@ class FreeCells:
         out = np.zeros(high - low, dtype=bool)
         if np.any(inner_high <= inner_low):
             return out
-        first, last = inner_low // self.TILE, (inner_high - 1) // self.TILE
-        tiles = np.stack(np.meshgrid(np.arange(first[0], last[0] + 1),
-                                     np.arange(first[1], last[1] + 1), indexing='ij'),
-                         axis=-1).reshape(-1, 2)
-        new = tiles[~self.tiles_done[tiles[:, 0], tiles[:, 1]]]
-        if len(new):
-            self._prove(new)
+        first, last = inner_low // self.TILE, (inner_high - 1) // self.TILE + 1
+        done = self.tiles_done[first[0]:last[0], first[1]:last[1]]
+        if not done.all():
+            self._prove(np.argwhere(~done) + first)
         inside = tuple(slice(a, b) for a, b in zip(inner_low - low, inner_high - low))
         out[inside] = self.free[inner_low[0]:inner_high[0], inner_low[1]:inner_high[1]]
         return out
@@ -159,8 +157,8 @@ class FreeCells:
             high = np.minimum(low + self.TILE, self.counts)
             around = self.base.block(low - pad, high + pad)
             cells = (slice(low[0], high[0]), slice(low[1], high[1]))
-            self.free[cells] = np.lib.stride_tricks.sliding_window_view(
-                around, (window, window)).all(axis=(-2, -1))
+            rows = sliding_window_view(around, window, axis=0).all(axis=-1)
+            self.free[cells] = sliding_window_view(rows, window, axis=1).all(axis=-1)
             self.forbidden[cells] = self.base.forbidden[cells]
         self.tiles_done[tiles[:, 0], tiles[:, 1]] = True
 
