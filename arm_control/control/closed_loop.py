@@ -21,16 +21,20 @@ class ClosedLoop:
 
     ``planner``: given to the core, which then plans and times in its own step (anything
     with ``plan(start_q, goal_xy)``, e.g. ``planning.planner.Planner``). ``observers`` are
-    called after every step with (loop, reading, voltage).
+    called after every step with (loop, reading, voltage). ``command_delay_s``: each command
+    acts this long after its reading, as through ROS; the core is told so (its step is for
+    when the command acts) unless ``told_delay`` is False.
     """
 
     def __init__(self, arm: ArmConfig, controller_config: ControllerConfig, planner=None,
                  start=(1.5708, -1.5708), seed: Optional[int] = 0,
-                 physics_step_s: float = 0.001):
+                 physics_step_s: float = 0.001, command_delay_s: float = 0.0,
+                 told_delay: bool = True):
         self.arm = arm
         self.plant = ArmPlant(arm, start, physics_step_s, seed)
         self.core = ArmController(arm, controller_config, planner)
         self.period_s = controller_config.period_s
+        self.command_delay_s, self.told_delay = command_delay_s, told_delay
         self.forbidden = ForbiddenSpace(arm)
         self.sensors_on = True
         self.lowest_m = 0.0          # the lowest point of either link so far (y, m)
@@ -52,15 +56,18 @@ class ClosedLoop:
         if reading is None and self.sensors_on:
             reading = self.plant.read()
         reached = self.core.goals.counts['reached']
-        voltage = self.core.step(self.now, reading)
+        acts_s = self.now + (self.command_delay_s if self.told_delay else 0.0)
+        voltage = self.core.step(acts_s, reading, self.now)
         if self.core.goals.counts['reached'] > reached:
             self.arrivals.append((self.core.goals.goal_q.copy(), self.true_q,
                                   np.array(self.plant.state[2:])))
         self.voltages.append(voltage)
         for observer in self.observers:
             observer(self, reading, voltage)
+        if self.command_delay_s > 0.0:
+            self.plant.advance(self.command_delay_s)
         self.plant.set_voltage(voltage)
-        self.plant.advance(self.period_s)
+        self.plant.advance(self.period_s - self.command_delay_s)
         self.lowest_m = min(self.lowest_m, float(self.forbidden.lowest_point_m(self.true_q)))
         return voltage
 

@@ -147,6 +147,14 @@ class ArmEstimator:
         kf.x[:4] = self._hard_stops(kf.x[:4])
         kf.P = _symmetric(kf.P)
 
+    def snapshot(self):
+        """The filter's state and covariance, for ``restore``."""
+        self._require_initialised()
+        return self._kf.x.copy(), self._kf.P.copy()
+
+    def restore(self, snapshot) -> None:
+        self._kf.x, self._kf.P = snapshot[0].copy(), snapshot[1].copy()
+
     @property
     def state(self) -> np.ndarray:
         """[θa, θb, ωa, ωb] (rad, rad/s)."""

@@ -3,7 +3,11 @@ was put somewhere else under it.
 
 Each reading is folded in at the time it was taken: the filter predicts with the voltage the
 motor controllers applied (the command within the current limits and the bus voltage the
-robot reports, as a roboRIO reads its own), updates, then predicts up to now.
+robot reports, as a roboRIO reads its own), updates, then predicts up to now. The prediction
+to now is made afresh each period from the last reading folded in, with each command over
+the time it acted: a reading taken before the instant the last prediction was for (through
+ROS, one that came just after a tick, and the controller works at the instant its command
+will act) is still folded in at its own time, not at that later one.
 
 The battery's open-circuit voltage, V_bus + R_battery·I_supply from the same reading, is
 what the control ahead uses: it changes slowly, while the bus itself swings with every
@@ -26,6 +30,10 @@ from arm_control.model.electrical import PowerSupply
 # for noise); else the arm is falling or pushed, for the tracking-error rule to judge.
 LEAP_SPEED_FACTOR = 3.0
 LEAP_MARGIN_RAD = 0.05
+# The prediction from the last reading is kept as the filter's state once it reaches this far
+# (the sensors silent: no prediction grows without end; a later reading older than that is
+# folded in there).
+KEEP_PREDICTION_AFTER_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -62,6 +70,10 @@ class Sensing:
         self.max_leap_speed_rad_s = LEAP_SPEED_FACTOR * float(
             np.max(dynamics.free_speed_rad_s(self.nominal_voltage)))
         self.time_s = None                 # of the estimate; None before the first reading
+        self.kept = None                   # the filter at kept_s: the last reading folded in
+        self.kept_s = -math.inf
+        self.held_v = np.zeros(2)          # the command acting at kept_s ...
+        self.commands = []                 # ... and (from s, volts) of those since
         self.last_reading_s = -math.inf
         self.last_potentiometer = None
         self.last_sampled_s = math.nan
@@ -78,21 +90,37 @@ class Sensing:
     def age_s(self, now_s: float) -> float:
         return now_s - self.last_reading_s
 
-    def _predict(self, command_v, to_s: float) -> None:
-        if to_s > self.time_s:
-            self.estimator.predict(command_v, to_s - self.time_s, self.supply, self.bus_voltage)
-            self.time_s = to_s
+    def _predict(self, from_s: float, to_s: float) -> None:
+        """The filter from ``from_s`` to ``to_s``, each command over the time it acted."""
+        t, volts = from_s, self.held_v
+        for start_s, command in self.commands:
+            if start_s >= to_s:
+                break
+            if start_s > t:
+                self.estimator.predict(volts, start_s - t, self.supply, self.bus_voltage)
+                t = start_s
+            volts = command
+        if to_s > t:
+            self.estimator.predict(volts, to_s - t, self.supply, self.bus_voltage)
+
+    def _keep(self, at_s: float) -> None:
+        """The filter as it is now is the one at ``at_s``: later predictions start here."""
+        self.kept, self.kept_s = self.estimator.snapshot(), at_s
+        while self.commands and self.commands[0][0] <= at_s:
+            self.held_v = self.commands.pop(0)[1]
 
     def update(self, now_s: float, reading, reading_time_s, command_v) -> None:
-        """Predict with the command held since the last update up to the reading, update,
-        predict up to now; without a (finite) reading, only predict."""
+        """Fold in ``reading`` (taken at ``reading_time_s``, default now) and predict the
+        state at ``now_s``; ``command_v``: the command of the last update, acting since."""
+        if self.started:
+            self.commands.append((self.time_s, np.asarray(command_v, float)))
         if reading is not None:
             pot = np.asarray(reading.potentiometer_rad, float).reshape(2)
             if not np.all(np.isfinite(pot)):
                 reading = None
         if reading is None:
             if self.started:
-                self._predict(command_v, now_s)
+                self._predict_to(now_s)
             return
         taken_s = now_s if reading_time_s is None else min(reading_time_s, now_s)
         velocity = np.asarray(reading.velocity_rad_s, float).reshape(2)
@@ -104,18 +132,30 @@ class Sensing:
             taken_s, sampled_s, pot
         if not self.started:
             self.estimator.reset(pot, np.where(np.isfinite(encoder), encoder, 0.0))
-            self.time_s = taken_s
+            self.held_v, self.commands = np.asarray(command_v, float), []
         else:
-            self._predict(command_v, taken_s)
+            self.estimator.restore(self.kept)
+            taken_s = max(taken_s, self.kept_s)
+            self._predict(self.kept_s, taken_s)
             resets = self.estimator.jump_count
             self.estimator.update(pot, velocity, encoder)
             self.jumped |= self.estimator.jump_count > resets and leapt
+        self._keep(taken_s)
         if math.isfinite(bus) and bus > 0.0:
             self.bus_voltage = bus
             current = float(getattr(reading, 'supply_current_a', math.nan))
             self.battery_voltage = bus + self.battery_resistance_ohm * current \
                 if math.isfinite(current) else self.nominal_voltage
-        self._predict(command_v, now_s)
+        self._predict(self.kept_s, now_s)
+        self.time_s = max(now_s, taken_s)
+
+    def _predict_to(self, now_s: float) -> None:
+        """Without a reading: the state at ``now_s`` from the last one folded in."""
+        self.estimator.restore(self.kept)
+        self._predict(self.kept_s, now_s)
+        self.time_s = max(now_s, self.kept_s)
+        if now_s - self.kept_s > KEEP_PREDICTION_AFTER_S:
+            self._keep(now_s)
 
     def _leapt(self, pot, taken_s: float, sampled_s: float) -> bool:
         """The potentiometers moved farther since the last reading than the arm can move: it

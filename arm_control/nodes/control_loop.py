@@ -58,7 +58,7 @@ class ControlLoop:
         """When the next command will act: now in real time (a poke ticks at once); in
         simulated time the next step, once this one is answered (the sim is on it)."""
         now = self.now_s()
-        if self._simulated() and self.last_tick_s is not None \
+        if self.simulated() and self.last_tick_s is not None \
                 and now <= self.last_tick_s + DUE_SLACK_S:
             return self.last_tick_s + self.period_s
         return now
@@ -68,7 +68,7 @@ class ControlLoop:
 
     def poke(self) -> None:
         """Tick now, and count the periods on from here (in real time)."""
-        if not self._simulated():
+        if not self.simulated():
             self._wake.set()
 
     def stop(self) -> None:
@@ -77,7 +77,7 @@ class ControlLoop:
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(1.0)
 
-    def _simulated(self) -> bool:
+    def simulated(self) -> bool:
         return self.clock.clock_type == ClockType.ROS_TIME and self.clock.ros_time_is_active
 
     def _run(self) -> None:
@@ -94,7 +94,7 @@ class ControlLoop:
                 continue
             poked = self._wake.is_set()
             due = now >= due_s - DUE_SLACK_S
-            if not poked and due and self._simulated():
+            if not poked and due and self.simulated():
                 waiting_since = wall if waiting_since is None else waiting_since
                 starved = not self.has_input(now) and wall - waiting_since < SIM_INPUT_WAIT_S
                 held = wall - last_tick_wall < self.period_s and self.working()
@@ -111,10 +111,10 @@ class ControlLoop:
                 # On time: keep the phase. Poked, or a whole period late: a new phase. In
                 # simulated time the phase is the sim's steps: once per step, never twice for
                 # one (a clock two steps on must not leave a tick due at the same time).
-                late = poked or now > due_s + self.period_s or self._simulated()
+                late = poked or now > due_s + self.period_s or self.simulated()
                 due_s = (now if late else due_s) + self.period_s
                 continue
             wait_s = due_s - now
-            if self._simulated():
+            if self.simulated():
                 wait_s = min(wait_s, SIM_TIME_POLL_S)
             self._wake.wait(wait_s)

@@ -29,6 +29,7 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import uninstall_signal_handlers
+from rclpy.time import Time
 from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
@@ -37,6 +38,7 @@ from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health
+from arm_control.control.latency import CommandDelay, ReadingClock
 from arm_control.control.sensing import SensorReading
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
@@ -84,6 +86,8 @@ class ControllerNode(Node):
         self.last_state = self.last_queue_version = None
         self.loop_periods_s, self.loop_compute_s, self.last_tick_s = [], [], None
         self.reading_ages_s = []            # arrival minus stamp of each joint_states
+        self.reading_clock = ReadingClock()
+        self.command_delay = CommandDelay(self.config.period_s)
         sys.setswitchinterval(0.001)   # another thread waits 1 ms for Python, not 5
 
         self.voltage_pub = self.create_publisher(Float64MultiArray, 'voltage_command', COMMANDS)
@@ -125,10 +129,19 @@ class ControllerNode(Node):
     def now_s(self) -> float:
         return self.loop.now_s()
 
+    def lag_s(self) -> float:
+        """How long after now a command sent now acts (``CommandDelay``); in simulated time
+        none: the sim applies a step's command from the step's start."""
+        return 0.0 if self.loop.simulated() else self.command_delay.delay_s
+
+    def core_now_s(self) -> float:
+        """The core's clock: the instant the command it computes now will act."""
+        return self.now_s() + self.lag_s()
+
     def command(self, call, *args):
         """Call the core under the lock, then say what it said."""
         with self.lock:
-            result = call(self.now_s(), *args)
+            result = call(self.core_now_s(), *args)
         self.publish_outputs()
         return result
 
@@ -148,8 +161,8 @@ class ControllerNode(Node):
                                  f'within {top_speed:.0f} rad/s; got {len(msg.name)} names, '
                                  f'{len(msg.position)} positions, {len(msg.velocity)} '
                                  'velocities')
-        now = self.now_s()
-        age_s = now - messages.stamp_s(msg.header)
+        now, stamp = self.now_s(), messages.stamp_s(msg.header)
+        age_s = now - stamp
         if math.isfinite(age_s):
             self.reading_ages_s.append(age_s)
 
@@ -158,8 +171,10 @@ class ControllerNode(Node):
                 now - latest[1] <= self.config.joint_state_timeout_s else missing
         encoder = fresh(self.encoders, (math.nan, math.nan))
         bus, supply_current = fresh(self.bus, (math.nan, math.nan))
+        # In simulated time the stamp is on our clock, which may not have reached it yet.
+        taken = stamp if self.loop.simulated() else self.reading_clock.taken_s(stamp, now)
         self.reading = (SensorReading(tuple(position), tuple(velocity), tuple(encoder),
-                                      messages.stamp_s(msg.header), bus, supply_current), now)
+                                      stamp, bus, supply_current), taken)
 
     @guarded
     def on_encoders(self, msg: JointState) -> None:
@@ -222,7 +237,7 @@ class ControllerNode(Node):
         self.plans.retune(arm, config)
         with self.lock:
             self.core.retune(arm, config)
-            self.core.events.say(self.now_s(), Kind.PARAMETERS, 'info',
+            self.core.events.say(self.core_now_s(), Kind.PARAMETERS, 'info',
                                  f'changed at run time: {", ".join(changed) or "nothing"}')
         self.arm, self.config = arm, config
         self.outputs.trigger()
@@ -248,12 +263,13 @@ class ControllerNode(Node):
 
     def tick(self) -> None:
         began, now = time.perf_counter(), self.now_s()
+        acts_s = now + self.lag_s()
         reading, self.reading = self.reading, None
         with self.lock:
             try:
-                voltage = self.core.step(now, *(reading or (None, None)))
+                voltage = self.core.step(acts_s, *(reading or (None, None)))
             except Exception as error:              # a bug must stop the arm, not the node
-                self.core.estop(now, f'internal error in the control step: {error!r}',
+                self.core.estop(acts_s, f'internal error in the control step: {error!r}',
                                 cut_power=True)
                 voltage = np.zeros(2)
             estimate, setpoint = self.core.estimate, self.core.setpoint
@@ -262,7 +278,8 @@ class ControllerNode(Node):
                     or self.core.goals.queue.version != self.last_queue_version)
         if estimate is not None:     # before the first reading there is nothing to command
             self.voltage_pub.publish(Float64MultiArray(data=[float(v) for v in voltage]))
-            stamp = self.get_clock().now().to_msg()
+            self.command_delay.sent(time.perf_counter() - began)
+            stamp = Time(nanoseconds=round(acts_s * 1e9)).to_msg()     # what they are for
             self.setpoint_pub.publish(messages.joint_state(stamp, setpoint[0], setpoint[1]))
             self.estimate_pub.publish(messages.joint_state(stamp, estimate[:2], estimate[2:]))
         if said:                                    # the executor publishes what changed
@@ -276,7 +293,7 @@ class ControllerNode(Node):
         """From the worker's result thread: the plan to the core, from when the next command
         acts (in simulated time the next step, if this one's went out), and the loop runs."""
         with self.lock:
-            self.core.on_timed_plan(self.loop.next_command_s(), timed)
+            self.core.on_timed_plan(self.loop.next_command_s() + self.lag_s(), timed)
         self.loop.poke()
 
     # ------------------------------------------------------------------ outputs

@@ -30,6 +30,7 @@ sim ran ahead of the controller) left every later one a period late, for good.
 """
 
 import math
+import statistics
 import sys
 import time
 
@@ -79,6 +80,7 @@ class SimNode(Node):
         self.commanded_this_period = False
         self.reading_sent_ns = 0                  # system time the last reading went out
         self.late_commands = 0                    # sent before the period's reading
+        self.command_transits_s = []              # from the controller's send to acting
         self.period_began_wall_s = self.wall_clock.now().nanoseconds * 1e-9
 
         self.joint_states_pub = self.create_publisher(JointState, 'joint_states', STATE_STREAM)
@@ -144,6 +146,7 @@ class SimNode(Node):
         self.catch_up(now)
         self.plant.set_voltage(voltage)
         self.last_command_s = now
+        self.command_transits_s.append((time.time_ns() - info['source_timestamp']) * 1e-9)
         if self.simulated_time and info['source_timestamp'] < self.reading_sent_ns:
             self.late_commands += 1
         else:
@@ -247,6 +250,7 @@ class SimNode(Node):
     def publish_diagnostics(self) -> None:
         periods, self.periods_s = self.periods_s, []
         stats = loop_statistics(periods, [])
+        transits, self.command_transits_s = self.command_transits_s, []
         brownouts, self.brownouts_last_second = self.brownouts_last_second, []
         level, message = DiagnosticStatus.OK, 'running'
         rejected_now = self.commands_rejected - self.commands_rejected_said
@@ -269,6 +273,9 @@ class SimNode(Node):
             'mean period (s)': f'{stats["mean"]:.4f}', 'worst period (s)': f'{stats["worst"]:.4f}',
             'commands rejected': self.commands_rejected,
             'commands late for their period': self.late_commands,
+            'command transit median (ms)': f'{1e3 * statistics.median(transits):.2f}'
+                                           if transits else 'n/a',
+            'command transit worst (ms)': f'{1e3 * max(transits):.2f}' if transits else 'n/a',
             'commanded voltage (V)': list(self.plant.command),
             'applied voltage (V)': [round(v, 3) for v in power.applied_v],
             'bus voltage (V)': f'{power.bus_voltage:.2f}',
