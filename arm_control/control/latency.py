@@ -46,7 +46,8 @@ class CommandDelay:
     The controller computes each command for that instant -- the state predicted to it, the
     trajectory sampled there. In one process, commands acting 10 ms late made "mid → stow"
     settle 0.54-0.59 s after its goal instead of 0.46-0.50 s; computed for when they act,
-    0.47 s. Through ROS a tick took 4-10 ms to publish during a move."""
+    0.47 s. Through ROS, during a move, a tick's command went out after 3.7 ms of CPU at the
+    median (6.1 ms at p90)."""
 
     def __init__(self, period_s: float):
         self.period_s = period_s
