@@ -45,7 +45,7 @@ def test_a_configuration_in_a_cell_proved_clear_has_its_whole_margin_free(files)
     space, margin = ForbiddenSpace(arm), arm.world.clearance_rad
     rng = np.random.default_rng(13)
     q = rng.uniform(space.limits[:, 0] - 0.05, space.limits[:, 1] + 0.05, (50_000, 2))
-    proved = free_cells(arm, margin).contain(q)
+    proved, _ = free_cells(arm, margin).lookup(q)
     nearby = q[proved][:, None, :] + rng.uniform(-margin, margin, (np.count_nonzero(proved),
                                                                    8, 2))
     nearby = nearby.reshape(-1, 2)

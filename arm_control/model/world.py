@@ -79,10 +79,6 @@ class FreeCells:
         self.base = free_cells(arm) if pad_rad > 0.0 else None
         self.pad_cells = math.ceil(pad_rad / self.cell_rad) if pad_rad > 0.0 else 0
 
-    def contain(self, q) -> np.ndarray:
-        """Whether each configuration of q (N, 2) lies in a cell proved free."""
-        return self.lookup(q)[0]
-
     def lookup(self, q) -> tuple[np.ndarray, np.ndarray]:
         """Whether each configuration of q (N, 2) lies in a cell proved free, and in one
         proved forbidden (neither: the exact test decides)."""
