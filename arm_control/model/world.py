@@ -66,9 +66,10 @@ class FreeCells:
     def __init__(self, arm: ArmConfig, pad_rad: float = 0.0):
         h = self.HALF_WIDTH_RAD
         self.space = ForbiddenSpace(arm)
-        motion_m = (arm.shoulder.length_m + 2.0 * arm.elbow.length_m) * h
-        self.grown = ForbiddenSpace(arm, grow_m=motion_m)
-        self.shrunk = ForbiddenSpace(arm, grow_m=-motion_m)
+        if pad_rad <= 0.0:                 # free space's own cells, proved from the world
+            motion_m = (arm.shoulder.length_m + 2.0 * arm.elbow.length_m) * h
+            self.grown = ForbiddenSpace(arm, grow_m=motion_m)
+            self.shrunk = ForbiddenSpace(arm, grow_m=-motion_m)
         self.cell_rad = 2.0 * h
         self.low = self.space.limits[:, 0]
         self.counts = np.ceil((self.space.limits[:, 1] - self.low) / self.cell_rad).astype(int)
