@@ -1,43 +1,17 @@
-"""How late things are: when a reading was taken, and when a command will act, on the
-controller's clock. Through ROS both differ from the moment the controller handles them by
-milliseconds that matter to a time-optimal move; the controller works at the instant its
-command acts, with the state estimated for it.
+"""When a command will act, on the controller's clock. Through ROS it acts milliseconds
+after the tick that computed it, which matters to a time-optimal move; the controller works
+at that instant, with the state estimated for it.
 """
 
 from collections import deque
 import math
 import statistics
 
-# A reading is timed over the least transit of this many (a second at 50 Hz) ...
-TRANSIT_WINDOW = 50
-# ... and at most this long before it arrived, whatever its stamp says.
-MAX_TRANSIT_S = 0.05
 # A command's compute is taken as the median of this many ticks ...
 COMPUTE_WINDOW = 25
 # ... and its way to the motors as this: the sim hears a command 0.8-1.5 ms after it was
 # sent (its diagnostics' "command transit median", each second of the suite on one host).
 COMMAND_TRANSIT_S = 0.001
-
-
-class ReadingClock:
-    """When each reading was taken, on our clock: at its stamp, as ROS means it, where the
-    stamps are on our clock -- the least transit (arrival − stamp) of the last
-    ``TRANSIT_WINDOW`` readings is between 0 and ``MAX_TRANSIT_S`` -- and else at its stamp
-    shifted by that least transit (another host's clock mapped onto ours); never after its
-    arrival and at most ``MAX_TRANSIT_S`` before it. Timed at their arrival, readings that
-    came 4 ms late (9 ms at p90, through ROS on an idle machine) left the estimate behind
-    the arm by as much motion: in one process that delay made a move settle 45-70 ms later."""
-
-    def __init__(self, window: int = TRANSIT_WINDOW):
-        self.transits_s = deque(maxlen=window)
-
-    def taken_s(self, stamp_s: float, arrival_s: float) -> float:
-        if not math.isfinite(stamp_s):
-            return arrival_s
-        self.transits_s.append(arrival_s - stamp_s)
-        least = min(self.transits_s)
-        shift = 0.0 if 0.0 <= least <= MAX_TRANSIT_S else least
-        return min(max(stamp_s + shift, arrival_s - MAX_TRANSIT_S), arrival_s)
 
 
 class CommandDelay:

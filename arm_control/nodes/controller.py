@@ -38,7 +38,7 @@ from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health
-from arm_control.control.latency import CommandDelay, ReadingClock
+from arm_control.control.latency import CommandDelay
 from arm_control.control.sensing import SensorReading
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
@@ -86,7 +86,6 @@ class ControllerNode(Node):
         self.last_state = self.last_queue_version = None
         self.loop_periods_s, self.loop_compute_s, self.last_tick_s = [], [], None
         self.reading_ages_s = []            # arrival minus stamp of each joint_states
-        self.reading_clock = ReadingClock()
         self.command_delay = CommandDelay(self.config.period_s)
         sys.setswitchinterval(0.001)   # another thread waits 1 ms for Python, not 5
 
@@ -171,8 +170,11 @@ class ControllerNode(Node):
                 now - latest[1] <= self.config.joint_state_timeout_s else missing
         encoder = fresh(self.encoders, (math.nan, math.nan))
         bus, supply_current = fresh(self.bus, (math.nan, math.nan))
-        # In simulated time the stamp is on our clock, which may not have reached it yet.
-        taken = stamp if self.loop.simulated() else self.reading_clock.taken_s(stamp, now)
+        # Taken at its arrival: timed at their stamps, the robot's readings through frc_bridge
+        # left a held arm moving in most samples (the robot applies a command at its own next
+        # loop, later than we assume). In simulated time the stamp is the clock's, which may
+        # not have reached it yet.
+        taken = stamp if self.loop.simulated() else now
         self.reading = (SensorReading(tuple(position), tuple(velocity), tuple(encoder),
                                       stamp, bus, supply_current), taken)
 
