@@ -2,11 +2,12 @@
 
 A goal from rest goes the way it goes through ROS, each step called as the nodes call it:
 
-- planner: what the planner node does for plan_path (``BranchRanking.plan``): the path of
-  each free elbow branch from one grid search (none for a preset's branch: the node builds
-  their shortest-path trees at start-up, and so does this bench), the branch choice (quick
-  estimates, and when another branch comes within the margin, a quick timing of the close
-  ones);
+- planner: what the planner node does for plan_path (``PresetAnswers.plan``): from one
+  preset to another, the answer it worked out at start-up; otherwise (``BranchRanking.plan``)
+  the path of each free elbow branch from one grid search (none for a preset's branch: the
+  node builds their shortest-path trees at start-up), the branch choice (quick estimates,
+  and when another branch comes within the margin, a quick timing of the close ones). This
+  bench prepares both as the node does;
 - quick: what the worker answers at once (``PlanTimer.time_plan(quick=True)``): the path
   checked and timed on a few dozen stages, not bent. The arm starts on it;
 - the user waits for planner + quick (the round trips through DDS and the pipe to the
@@ -41,7 +42,7 @@ import numpy as np  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.goals import Goal  # noqa: E402
-from arm_control.control.plans import PlanRequest, PlanTimer  # noqa: E402
+from arm_control.control.plans import PlanRequest, PlanTimer, PresetAnswers  # noqa: E402
 from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
 from arm_control.nodes.plan_worker import HandoverClock  # noqa: E402
@@ -84,10 +85,10 @@ def _timed(call):
     return result, time.thread_time() - cpu, time.perf_counter() - wall
 
 
-def one_goal(planner, timer, clock, request):
+def one_goal(answers, timer, clock, request):
     """The steps of one goal, as the nodes run them: {step: (CPU s, wall s)} and durations."""
     plan, plan_cpu, plan_wall = _timed(
-        lambda: timer.ranking.plan(planner, request.start_q, request.goal.xy))
+        lambda: answers.plan(request.start_q, request.goal.xy))
     quick, quick_cpu, quick_wall = _timed(lambda: timer.time_plan(request, plan, quick=True))
     handover = clock.handover_s(quick_wall, quick.trajectory.duration_s if quick.ok else 0.0)
     refined, refine_cpu, refine_wall = _timed(lambda: timer.refine(quick, handover))
@@ -107,13 +108,16 @@ def planning_times(files=(), repeats=PLANNING_REPEATS):
     timer, clock = PlanTimer(arm, controller), HandoverClock()
     for q in timer.ranking.preset_configurations():      # as the node does at start-up
         planner.prepare(q)
+    answers = PresetAnswers(timer.ranking, planner)
+    while answers.pending:
+        answers.prepare_next()
     requests = [PlanRequest(i, Goal(goal[0], goal[1], name), tuple(q), (0.0, 0.0), None, 0.0)
                 for i, (name, q, goal) in enumerate(planning_moves(arm, files))]
     first = None
     samples = {r.goal.label: [] for r in requests}
     for repeat in range(repeats + 1):
         for request in requests:
-            steps = one_goal(planner, timer, clock, request)
+            steps = one_goal(answers, timer, clock, request)
             if first is None:          # the first goal of a fresh planner and worker
                 first = 1e3 * (steps['planner'][1] + steps['quick'][1])
             if repeat > 0:

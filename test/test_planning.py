@@ -9,7 +9,8 @@ import pytest
 
 from arm_control import config
 from arm_control.config import PlannerConfig, Rectangle
-from arm_control.planning.planner import Planner
+from arm_control.control.plans import BranchRanking, PresetAnswers
+from arm_control.planning.planner import Planner, poses_from_waypoints
 
 
 @pytest.fixture(scope='module')
@@ -110,6 +111,49 @@ def test_every_preset_is_planned_from_the_start_pose_and_from_each_other(frc):
                                        atol=1e-9)
             planned_around += len(plan.waypoints_rad) > 2
     assert planned_around >= 4          # on this robot planning visibly matters
+
+
+class CountingPlanner:
+    """The planner, counting the searches asked of it."""
+
+    def __init__(self, planner):
+        self.planner, self.searches = planner, 0
+
+    def plan(self, *args):
+        self.searches += 1
+        return self.planner.plan(*args)
+
+    def plan_to_configurations(self, *args):
+        self.searches += 1
+        return self.planner.plan_to_configurations(*args)
+
+
+def test_a_goal_from_preset_to_preset_is_answered_without_a_search_as_a_search_would(frc):
+    ranking = BranchRanking(frc.arm)
+    counting = CountingPlanner(frc)
+    answers = PresetAnswers(ranking, counting)
+    while answers.pending:
+        answers.prepare_next()
+    counting.searches = 0
+    goals = presets(frc)
+    start = (math.pi / 2, -math.pi / 2)
+    first = answers.plan(start, goals['stow'])           # not from a preset: searched
+    assert counting.searches == 1
+    start = first.waypoints_rad[-1]
+    for name, point in [*goals.items(), *goals.items()]:
+        if math.dist(frc.kinematics.forward(start), point) < 1e-6:
+            continue
+        plan = answers.plan(start, point)
+        # the next start as the planner node gets it: the last answer's end, as a pose
+        x, y, yaw = poses_from_waypoints(frc.kinematics, plan.waypoints_rad)[-1]
+        start = frc.kinematics.configuration_from_pose(x, y, yaw)
+        fresh = ranking.plan(frc, plan.waypoints_rad[0], point)
+        np.testing.assert_array_equal(plan.waypoints_rad, fresh.waypoints_rad)
+    assert counting.searches == 1, 'every later goal went from a preset to a preset'
+    off = np.array(first.waypoints_rad[-1]) + 0.01          # near a preset, not on it
+    plan = answers.plan(off, goals['high_score'])
+    assert counting.searches == 2
+    assert_free_path(frc, plan, off)
 
 
 def test_the_cheaper_elbow_branch_wins(frc):

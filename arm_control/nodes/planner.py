@@ -11,7 +11,9 @@ plan; the reason is logged.
 Publishes ``planned_path`` (Path, latched: the last successful plan), ``cspace_map``
 (OccupancyGrid, latched, published once at start) and ``/diagnostics``. In its first second
 it builds the shortest-path trees toward every preset's elbow branches (``Planner.prepare``),
-so that plans to a preset need no search.
+so that plans to a preset need no search; then, in the next few, the answers from each
+preset's branches to every other preset (``PresetAnswers``), so that a goal from one preset
+to another is answered at once.
 
 ``cspace_map`` is the configuration space as a map in frame ``cspace`` (set RViz's fixed
 frame to it): cell (i, j) = (shoulder cell i, elbow cell j), so x is the shoulder angle and
@@ -35,7 +37,7 @@ from rclpy.node import Node
 from arm_control.config import ArmConfig, FRAME_ID, PlannerConfig
 from arm_control.control.events import quote
 from arm_control.control.goals import PLANE_TOLERANCE_M
-from arm_control.control.plans import BranchRanking
+from arm_control.control.plans import BranchRanking, PresetAnswers
 from arm_control.nodes import messages
 from arm_control.nodes.common import declare_parameters, LATCHED, run, status
 from arm_control.planning.planner import Planner, poses_from_waypoints
@@ -76,6 +78,7 @@ class PlannerNode(Node):
         self.planner = Planner(self.arm, self.config)
         self.last_plan = None                # ((start, goal), plan): the last answer
         self.ranking = BranchRanking(self.arm)
+        self.preset_answers = PresetAnswers(self.ranking, self.planner)
         self.build_s = time.monotonic() - began
         self.kinematics = self.planner.kinematics
         self.counts = {'plans': 0, 'no plan': 0, 'rejected requests': 0}
@@ -88,7 +91,8 @@ class PlannerNode(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_service(GetPlan, 'plan_path', self.on_plan_path)
         self.create_timer(1.0, self.publish_diagnostics)
-        # While idle after start-up, one preset branch's tree per tick (Planner.prepare).
+        # While idle after start-up, one preset branch's tree per tick (Planner.prepare),
+        # then one answer between presets (PresetAnswers).
         self.to_prepare = self.ranking.preset_configurations()
         self.prepare_timer = self.create_timer(PREPARE_PERIOD_S, self.prepare_next)
         self.map_pub.publish(self.cspace_map())
@@ -99,18 +103,21 @@ class PlannerNode(Node):
             f'{len(self.arm.world.regions)} forbidden regions; built in {self.build_s:.2f} s')
 
     def prepare_next(self) -> None:
-        """One tree, then a pause of twice what it took: the executor takes a due timer
-        before a waiting request, so trees built back to back (a loaded machine, where one
-        takes longer than the period) would keep plan_path waiting until the last one."""
+        """One tree or one answer, then a pause of twice what it took: the executor takes a
+        due timer before a waiting request, so work done back to back (a loaded machine,
+        where one takes longer than the period) would keep plan_path waiting until the end."""
         self.destroy_timer(self.prepare_timer)
-        if not self.to_prepare:
+        if not self.to_prepare and not self.preset_answers.pending:
             return
         began = time.monotonic()
         try:
-            self.planner.prepare(self.to_prepare.pop(0))
+            if self.to_prepare:
+                self.planner.prepare(self.to_prepare.pop(0))
+            else:
+                self.preset_answers.prepare_next()
         except Exception as error:                  # a failed table is no reason to stop
             self.get_logger().error(f'preparing the preset paths failed: {error!r}')
-            self.to_prepare = []
+            self.to_prepare, self.preset_answers.pending = [], []
         pause_s = max(PREPARE_PERIOD_S, 2.0 * (time.monotonic() - began))
         self.prepare_timer = self.create_timer(pause_s, self.prepare_next)
 
@@ -173,7 +180,7 @@ class PlannerNode(Node):
         at once, not a second search."""
         key = (tuple(np.asarray(start_q, float)), tuple(goal_xy))
         if self.last_plan is None or self.last_plan[0] != key:
-            self.last_plan = (key, self.ranking.plan(self.planner, start_q, goal_xy))
+            self.last_plan = (key, self.preset_answers.plan(start_q, goal_xy))
         return self.last_plan[1]
 
     def check_frame(self, header, what: str) -> None:
