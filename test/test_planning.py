@@ -234,6 +234,22 @@ def test_a_start_inside_the_intake_takes_the_shortest_way_out_first(frc):
     assert way_out >= nearest - 2 * lattice_step
 
 
+def test_a_start_inside_the_clearance_steps_out_then_goes_straight_when_it_can(seed_planner):
+    """The elbow 2.6 cm above the floor (arm stretched back, forearm hanging): free, but
+    within the clearance. The shortest path keeps the clearance once out of it: the nearest
+    way out, then the straight segment to the goal, which costs the least there is."""
+    start, goal = np.radians([178.54, -74.04]), np.radians([39.4, -64.1])
+    clearance = seed_planner.arm.world.clearance_rad
+    assert seed_planner.forbidden.is_free(start)
+    assert not seed_planner.forbidden.clear_by(start, clearance)
+    plan = seed_planner.plan_to_configuration(start, goal)
+    assert_free_path(seed_planner, plan, start, goal)
+    out, rest = plan.waypoints_rad[1], plan.waypoints_rad[1:]
+    assert np.abs(out - start).sum() <= 2 * seed_planner.config.grid_resolution_rad
+    assert seed_planner.forbidden.clear_by(rest, clearance).all()
+    assert plan.cost_rad == pytest.approx(np.abs(out - start).sum() + np.abs(goal - out).sum())
+
+
 def test_a_start_past_a_hard_stop_comes_back_inside(frc):
     start = [frc.forbidden.limits[0, 0] - 0.02, 1.2]     # shoulder 1.1° past its low stop
     assert 'past its limits' in frc.forbidden.why_forbidden(np.array(start))

@@ -291,6 +291,16 @@ class Planner:
             if not labels[g] & source_labels:
                 plans[g] = separated
         open_groups = [g for g in open_groups if plans[g] is None]
+        if escape is not None:
+            # From the way out as from a free start, a free straight segment is the
+            # shortest path there is: no search.
+            way_out = grid.configurations[escape]
+            for g in open_groups:
+                bounds = {k: float(np.abs(goals[k] - way_out).sum()) for k in groups[g]}
+                best = min(groups[g], key=bounds.get)
+                if self.segment_is_free(way_out, goals[best]):
+                    plans[g] = Plan.through([start, way_out, goals[best]])
+            open_groups = [g for g in open_groups if plans[g] is None]
         if not open_groups:
             return plans
         if each and escape is None:                 # a goal with a tree needs no search
