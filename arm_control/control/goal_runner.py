@@ -167,8 +167,9 @@ class GoalRunner:
                 or self.setpoints.timeline.last is not motion):
             return
         begin_s = motion.begin_s + timed.handover_s
-        if now_s > begin_s - HANDOVER_MARGIN_S:
-            return                          # too late: the quick trajectory carries on
+        if now_s > begin_s - HANDOVER_MARGIN_S:     # too late: the quick trajectory carries on
+            self.latency_s['a refinement too late by'] = now_s - (begin_s - HANDOVER_MARGIN_S)
+            return
         refined = Motion(timed.trajectory, begin_s)
         self.setpoints.schedule(refined)
         self.refinable = None

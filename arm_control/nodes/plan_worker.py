@@ -11,7 +11,8 @@ process goes.
 
 A plan from rest is answered twice: first a quick trajectory the arm starts on at once, then
 its refinement (``PlanTimer.refine``) from a hand-over time a safe margin past when the
-refinement is expected to be ready -- unless a newer request is already waiting. Once
+refinement is expected to be ready -- unless a newer request is already waiting -- and,
+when it took so long that it surely came too late, once more from later on. Once
 ready, the worker answers a move between two presets for itself, so the first goal finds its
 caches warm.
 """
@@ -40,6 +41,8 @@ HANDOVER_SAFETY = 1.5
 MIN_HANDOVER_S = 0.03
 # ... and never later than this share of the quick trajectory (a later one gains little).
 HANDOVER_SHARE = 0.4
+# A refinement that came too late is tried once more from later on, up to this share.
+RETRY_SHARE = 0.7
 FIRST_RATIO = 12.0
 RATIO_MEMORY = 0.7
 
@@ -99,17 +102,29 @@ def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, 
     except Exception as error:              # never leave a goal hanging
         timed = TimedPlan(request, None, f'timing the plan failed: {error!r}')
     send(timed)
-    quick_s = time.perf_counter() - began
+    sent = time.perf_counter()
+    quick_s = sent - began
     if not (from_rest and timed.ok) or newer():
         return
-    began = time.perf_counter()
-    try:
-        refined = timer.refine(timed, clock.handover_s(quick_s, timed.trajectory.duration_s))
-    except Exception:                       # the quick trajectory carries on
-        refined = None
-    clock.seen(quick_s, time.perf_counter() - began)
-    if refined is not None:
+    duration_s = timed.trajectory.duration_s
+    handover_s = clock.handover_s(quick_s, duration_s)
+    for _ in range(2):
+        began = time.perf_counter()
+        try:
+            refined = timer.refine(timed, handover_s)
+        except Exception:                   # the quick trajectory carries on
+            refined = None
+        done = time.perf_counter()
+        clock.seen(quick_s, done - began)
+        if refined is None:
+            return
         send(refined)
+        # The motion began no sooner than the quick answer went out: by then, surely late.
+        # Once more from later on, which the controller takes if it had to drop this one.
+        handover_s = done - sent + HANDOVER_SAFETY * (done - began)
+        if done - sent < refined.handover_s or handover_s > RETRY_SHARE * duration_s \
+                or newer():
+            return
 
 
 def _warm_up(timer: PlanTimer, clock: HandoverClock) -> None:
