@@ -264,6 +264,10 @@ class PresetAnswers:
                         for goal_xy in presets if goal_xy != (x, y)]
         self._answers = []                     # (start_q, goal_xy, plan)
 
+    @property
+    def ready(self) -> int:
+        return len(self._answers)
+
     def prepare_next(self) -> None:
         start_q, goal_xy = self.pending.pop(0)
         plan = self.ranking.plan(self.planner, start_q, goal_xy)

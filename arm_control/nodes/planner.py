@@ -243,7 +243,7 @@ class PlannerNode(Node):
         return msg
 
     def publish_diagnostics(self) -> None:
-        grid = self.planner.grid
+        grid, answers = self.planner.grid, self.preset_answers
         level = DiagnosticStatus.OK if self.last_ok else DiagnosticStatus.WARN
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()
@@ -255,6 +255,8 @@ class PlannerNode(Node):
             'free fraction': f'{grid.free.mean():.3f}',
             'blocked grid edges found': grid.blocked_edges,
             'build time (s)': f'{self.build_s:.3f}',
+            'answers between presets ready': f'{answers.ready} of '
+                                             f'{answers.ready + len(answers.pending)}',
         })]
         self.diagnostics_pub.publish(diagnostic)
 
