@@ -18,7 +18,10 @@ the same clock). Beside it, per move, from the configuration the arm started fro
 - where the time through ROS went, from the controller's ``goal_reached`` event: the
   planner's round trip, the timing in the controller's worker, the hand-over, waiting to
   start, the trajectory, and the rest (the goal's delivery, tracking and settling);
-- the lowest point of either link (mm; below 0 is in the floor).
+- the lowest point of either link (mm; below 0 is in the floor);
+- kept: the runs that started on the fine trajectory the controller's worker kept from an
+  earlier goal along the same path (each move's runs after its first, from the same
+  start). The ratios are given apart for the first time along a path and for again.
 
     python bench/bench_ros.py                  # the suite, idle (a few minutes)
     python bench/bench_ros.py --load           # with two busy loops beside it
@@ -240,13 +243,13 @@ def print_table(arm, rows, args, log_dir) -> None:
     print(f'\nMoves through ROS ({conditions}); node logs in {log_dir}\n')
     print('| move | ROS s | one process s | minimum s | ROS / min | one process / min | '
           'planner round trip ms | timing ms | hand-over + waiting ms | trajectory s | '
-          'delivery, tracking, settling ms | lowest mm |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|')
-    ratios, planning, contact = [], [], 0
+          'delivery, tracking, settling ms | lowest mm | kept |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+    ratios, planning, contact = {False: [], True: []}, [], 0
     for name in dict.fromkeys(row['name'] for row in rows):
         runs = [row for row in rows if row['name'] == name and 'q' in row]
         if not runs:
-            print(f'| {name} | no start | | | | | | | | | | |')
+            print(f'| {name} | no start | | | | | | | | | | | |')
             continue
         ros_s = statistics.median(row['ros_s'] for row in runs)
         parts = [breakdown_ms(row['sentence']) for row in runs
@@ -255,13 +258,16 @@ def print_table(arm, rows, args, log_dir) -> None:
         def part(key):
             values = [p.get(key, math.nan) for p in parts]
             return statistics.median(values) if values else math.nan
+        for p in parts:                 # a kept trajectory's lookup is its timing
+            p.setdefault('timing', p.get('kept trajectory', math.nan))
         known = sum(part(k) for k in ('planner round trip', 'timing', 'hand-over',
                                       'waiting to start', 'trajectory'))
         minimum_s = statistics.median(row['minimum_s'] for row in runs)
         local_s = statistics.median(row['local_s'] for row in runs)
         lowest = min(lowest_mm(arm, row['q']) for row in runs if len(row['q']))
         contact += lowest < 0.0
-        ratios += [row['ros_s'] / row['minimum_s'] for row in runs]
+        for row in runs:
+            ratios[was_kept(row)].append(row['ros_s'] / row['minimum_s'])
         planning += [p.get('planner round trip', math.nan) + p.get('timing', math.nan)
                      for p in parts]
         print(f'| {name} | {fmt(ros_s)} | {fmt(local_s)} | {fmt(minimum_s)} | '
@@ -269,17 +275,27 @@ def print_table(arm, rows, args, log_dir) -> None:
               f'{fmt(part("planner round trip"), ".0f")} | {fmt(part("timing"), ".0f")} | '
               f'{fmt(part("hand-over") + part("waiting to start"), ".0f")} | '
               f'{fmt(part("trajectory") / 1000.0)} | {fmt(1000.0 * ros_s - known, ".0f")} | '
-              f'{lowest:.0f} |')
-    finite = [r for r in ratios if math.isfinite(r)]
+              f'{lowest:.0f} | {sum(was_kept(row) for row in runs)}/{len(runs)} |')
     bar = 1.25 if args.load else 1.10
-    if finite:
-        print(f'\nROS / minimum: median {statistics.median(finite):.2f}, worst '
-              f'{max(finite):.2f}; within {bar:.2f}x: {sum(r <= bar for r in finite)} of '
-              f'{len(ratios)} runs. Floor contact on {contact} moves.')
+    print()
+    for kept, label in ((False, 'the first time along its path'),
+                        (True, 'again, on the kept trajectory')):
+        finite = [r for r in ratios[kept] if math.isfinite(r)]
+        if finite:
+            print(f'ROS / minimum, {label}: median {statistics.median(finite):.2f}, worst '
+                  f'{max(finite):.2f}; within {bar:.2f}x: {sum(r <= bar for r in finite)} of '
+                  f'{len(ratios[kept])} runs.')
+    print(f'Floor contact on {contact} moves.')
     planned = [p for p in planning if math.isfinite(p)]
     if planned:
         print(f'Planning per goal through ROS (planner round trip + timing): median '
               f'{statistics.median(planned):.0f} ms, p95 {np.percentile(planned, 95):.0f} ms.')
+
+
+def was_kept(row) -> bool:
+    """The move started on a fine trajectory the worker kept from an earlier goal along the
+    same path (``PlanTimer.keep``): each move's second run, from the same start."""
+    return 'kept trajectory' in breakdown_ms(row.get('sentence', ''))
 
 
 def main():

@@ -172,6 +172,31 @@ def test_a_refinement_of_a_motion_a_new_goal_took_over_from_is_ignored(arm, plan
                                quick.trajectory.sample(t - motion.begin_s)[0])
 
 
+def test_a_goal_that_comes_again_along_the_same_path_takes_the_kept_fine_trajectory(arm,
+                                                                                    planner):
+    """Kept (``PlanTimer.keep``), the fine timing from rest answers the same goal from the same
+    start along the same path at once, sound, and sooner than the quick one; any other
+    start is timed afresh."""
+    controller = config.load('controller')[1]
+    timer = PlanTimer(arm, controller)
+    goal = timer.ranking.validator.check(-1.0, 1.0, 0.0, '', 'back').goal
+    start = (1.5708, -1.5708)
+    plan = timer.ranking.plan(planner, start, goal.xy)
+    request = PlanRequest(1, goal, start, (0.0, 0.0), None, 0.0)
+    quick = timer.time_plan(request, plan, quick=True)
+    assert not quick.kept
+    timer.keep(request, plan)
+    again = timer.time_plan(PlanRequest(2, goal, start, (0.0, 0.0), None, 5.0), plan, quick=True)
+    assert again.kept and again.trajectory.duration_s < quick.trajectory.duration_s
+    assert_sound(again.trajectory, start, plan.waypoints_rad[-1], timer.dynamics,
+                 timer.forbidden, timer.limits)
+    moved = (start[0] + 0.01, start[1])
+    other = timer.ranking.plan(planner, moved, goal.xy)
+    elsewhere = timer.time_plan(PlanRequest(3, goal, moved, (0.0, 0.0), None, 6.0), other,
+                                quick=True)
+    assert elsewhere.ok and not elsewhere.kept
+
+
 # --- the worker -----------------------------------------------------------------------------
 
 def wait_for(condition, event, timeout_s=10.0) -> bool:
@@ -221,6 +246,15 @@ def test_the_worker_answers_a_goal_from_rest_at_once_then_refines_and_a_moving_s
         assert not wait_for(lambda: len(answers) > before + 1, arrived, 1.0)   # nothing more
         moving = answers[before]
         assert moving.request.request_id == 2 and moving.ok and math.isnan(moving.handover_s)
+        # Idle a while after a goal from rest, the worker kept its path's fine timing: the
+        # same goal again is answered with it, and nothing more.
+        time.sleep(1.0)
+        before = len(answers)
+        worker.submit(PlanRequest(3, goal, start, (0.0, 0.0), None, 20.0), plan)
+        assert wait_for(lambda: len(answers) > before, arrived, 30.0)
+        assert not wait_for(lambda: len(answers) > before + 1, arrived, 1.0)
+        kept = answers[before]
+        assert kept.kept and kept.trajectory.duration_s < quick.trajectory.duration_s
     finally:
         worker.close()
 

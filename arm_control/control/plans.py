@@ -18,6 +18,7 @@ the quick one will be a little later (``refine``), which takes over there when i
 time and ends sooner. The user waits only for the first.
 """
 
+from collections import OrderedDict
 from dataclasses import dataclass, replace
 import math
 import time
@@ -41,6 +42,8 @@ BRANCH_SCREEN_MARGIN = 0.25
 # one's (the pose it travels as rounds the angles) and its goal within this.
 SAME_START_RAD = 1e-6
 SAME_GOAL_M = 1e-9
+# Fine trajectories from rest kept for goals that come again along the same path.
+KEPT_TRAJECTORIES = 64
 # The first waypoint of a plan may differ from the requested start by rounding only ...
 PLAN_START_TOLERANCE_RAD = 0.01
 # ... and its last must put the tool on the goal.
@@ -82,7 +85,8 @@ class TimedPlan:
     (NaN: in-process, no round trip); ``received_s``: when the core got it (the node's
     clock) -- where a goal's time goes, before the arm moves. ``handover_s`` (NaN: none):
     this answer refines the motion taken for the same request, from this long after that
-    motion's start.
+    motion's start. ``kept``: the fine trajectory kept from an earlier goal along the same
+    path (``PlanTimer.keep``), which needs no refinement.
     """
 
     request: PlanRequest
@@ -92,6 +96,7 @@ class TimedPlan:
     answered_s: float = math.nan
     received_s: float = math.nan
     handover_s: float = math.nan
+    kept: bool = False
 
     @property
     def ok(self) -> bool:
@@ -118,18 +123,47 @@ class PlanTimer:
         self.clear_space = ForbiddenSpace(arm, arm.world.clearance_rad)
         self.limits = TrajectoryLimits.from_config(arm, config)
         self.ranking = BranchRanking(arm)
+        self._kept = OrderedDict()          # (start, goal, waypoints): fine from rest
 
     def time_plan(self, request: PlanRequest, plan, quick: bool = False) -> TimedPlan:
         """Check ``plan`` (anything with ``ok``, ``reason`` and ``waypoints_rad``) against the
         request and time it; ``quick``: from rest, on few stages and not bent (``refine``
-        makes it better from a little later)."""
+        makes it better from a little later) -- or, for a goal that comes again from rest
+        along the same path, the fine trajectory kept from the last time (``keep``)."""
         started = time.perf_counter()
+        key = self._key(request, plan)
+        if key in self._kept:
+            self._kept.move_to_end(key)
+            return TimedPlan(request, self._kept[key], compute_s=time.perf_counter() - started,
+                             kept=True)
         try:
             trajectory, reason = self._time(request, plan, quick)
         except TrajectoryError as error:
             trajectory = None
             reason = f'no trajectory along the plan to {request.goal.label}: {error}'
         return TimedPlan(request, trajectory, reason, time.perf_counter() - started)
+
+    def keep(self, request: PlanRequest, plan) -> None:
+        """Time ``plan`` finely from rest and keep it for the next goal along the same path,
+        as 6328 keeps its preset-to-preset trajectories: a robot's goals come again and
+        again, and the fine trajectory then needs no quick start and no hand-over."""
+        key = self._key(request, plan)
+        if key is None or key in self._kept:
+            return
+        timed = self.time_plan(request, plan)
+        if timed.ok:
+            self._kept[key] = timed.trajectory
+            while len(self._kept) > KEPT_TRAJECTORIES:
+                self._kept.popitem(last=False)
+
+    @staticmethod
+    def _key(request: PlanRequest, plan):
+        """What a kept trajectory is for: a goal from rest, its start and the path (None for
+        a moving start or no plan)."""
+        if request.start_time_s is not None or plan is None or not plan.ok:
+            return None
+        waypoints = np.asarray(plan.waypoints_rad, float)
+        return (tuple(request.start_q), tuple(request.goal.xy), waypoints.tobytes())
 
     def refine(self, quick: TimedPlan, handover_s: float) -> Optional[TimedPlan]:
         """The answer that takes over from ``quick``'s trajectory ``handover_s`` after its

@@ -12,7 +12,10 @@ process goes.
 A plan from rest is answered twice: first a quick trajectory the arm starts on at once, then
 its refinement (``PlanTimer.refine``) from a hand-over time a safe margin past when the
 refinement is expected to be ready -- unless a newer request is already waiting -- and,
-when it took so long that it surely came too late, once more from later on. Once
+when it took so long that it surely came too late, once more from later on. Once no request
+has come for a while, it times each such path finely from rest and keeps it
+(``PlanTimer.keep``): the next goal from rest along the same path is answered with that
+trajectory at once, with nothing to refine. Once
 ready, the worker answers a move between two presets for itself, so the first goal finds its
 caches warm.
 """
@@ -43,6 +46,10 @@ MIN_HANDOVER_S = 0.03
 HANDOVER_SHARE = 0.4
 # A refinement that came too late is tried once more from later on, up to this share.
 RETRY_SHARE = 0.7
+# Paths from rest are timed finely and kept (``PlanTimer.keep``) once no request has come
+# for this long (s), the latest first, at most this many waiting.
+KEEP_WHEN_IDLE_S = 0.1
+KEEP_QUEUE = 8
 FIRST_RATIO = 12.0
 RATIO_MEMORY = 0.7
 
@@ -70,8 +77,12 @@ def _serve(requests: Connection, results: Connection) -> None:
     request's id: done with it; new (arm, config) when the settings change at run time."""
     timer = None
     clock = HandoverClock()
+    to_keep = []                    # (request, plan): timed finely and kept when idle
     while True:
         try:
+            if to_keep and not requests.poll(KEEP_WHEN_IDLE_S):
+                _keep(timer, *to_keep.pop())
+                continue
             item = requests.recv()
         except (EOFError, OSError):
             return
@@ -79,7 +90,7 @@ def _serve(requests: Connection, results: Connection) -> None:
             return
         if isinstance(item[0], ArmConfig):
             first = timer is None
-            timer = PlanTimer(*item)
+            timer, to_keep = PlanTimer(*item), []
             if first:
                 results.send(None)                      # ready
                 # The moving-start solver's import (0.8 s) done meanwhile, not at the first
@@ -87,14 +98,23 @@ def _serve(requests: Connection, results: Connection) -> None:
                 threading.Thread(target=toppra_solver, daemon=True).start()
                 _warm_up(timer, clock)
             continue
-        _answer(timer, clock, *item, results.send, requests.poll)
+        if _answer(timer, clock, *item, results.send, requests.poll):
+            to_keep = (to_keep + [item])[-KEEP_QUEUE:]
         results.send(item[0].request_id)
 
 
+def _keep(timer: PlanTimer, request: PlanRequest, plan) -> None:
+    try:
+        timer.keep(request, plan)           # for the next goal along this path
+    except Exception:                       # that one is timed afresh
+        pass
+
+
 def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, send,
-            newer) -> None:
+            newer) -> bool:
     """Time ``plan`` for ``request`` and ``send`` the answer; from rest, the quick one, then
-    (unless ``newer()``: another request waits) its refinement."""
+    (unless ``newer()``: another request waits) its refinement. True: a path from rest worth
+    timing finely and keeping."""
     from_rest = request.start_time_s is None
     began = time.perf_counter()
     try:
@@ -104,8 +124,17 @@ def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, 
     send(timed)
     sent = time.perf_counter()
     quick_s = sent - began
-    if not (from_rest and timed.ok) or newer():
-        return
+    if not (from_rest and timed.ok) or timed.kept:
+        return False
+    if newer():
+        return True
+    _refine(timer, clock, timed, sent, quick_s, send, newer)
+    return True
+
+
+def _refine(timer: PlanTimer, clock: HandoverClock, timed: TimedPlan, sent: float,
+            quick_s: float, send, newer) -> None:
+    """The quick answer's refinement, and once more from later on when it came too late."""
     duration_s = timed.trajectory.duration_s
     handover_s = clock.handover_s(quick_s, duration_s)
     for _ in range(2):
