@@ -15,9 +15,8 @@ refinement is expected to be ready -- unless a newer request is already waiting 
 when it took so long that it surely came too late, once more from later on. Once no request
 has come for a while, it times each such path finely from rest and keeps it
 (``PlanTimer.keep``): the next goal from rest along the same path is answered with that
-trajectory at once, with nothing to refine. Once
-ready, the worker answers a move between two presets for itself, so the first goal finds its
-caches warm.
+trajectory at once, with nothing to refine. At start-up, once ready, the worker answers a
+move between two presets for itself, so the first goal finds its caches warm.
 """
 
 from multiprocessing.connection import Connection
