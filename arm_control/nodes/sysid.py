@@ -39,6 +39,10 @@ from arm_control.sysid.settings import SysIdConfig
 # Joint states for this long before driving, so that other publishers show: DDS discovery
 # took over 1 s on a loaded 2-core machine. Driving stops if one shows later.
 DISCOVERY_S = 2.0
+# A start it cannot excite from is refused only after this long: most often another node's
+# commands moved the arm there, and that node's publisher can show later still (over 2 s on
+# a loaded machine), so its reason is said instead.
+UNSAFE_START_WAIT_S = 5.0
 SHUTDOWN_ACK_S = 0.5        # at most this long on exit for the 0 V command to arrive
 LOG_NAME = 'log.mcap'
 
@@ -149,7 +153,8 @@ class SysIdNode(Node):
         try:
             self.session = Session(self.arm, self.settings, self.joint_sample[1])
         except ValueError as error:
-            self.finish(f'no safe excitation: {error}')
+            if now - self.first_joint_s >= UNSAFE_START_WAIT_S:
+                self.finish(f'no safe excitation: {error}')
             return
         for note in self.session.notes:
             self.get_logger().warning(f'excitation {note}')
