@@ -65,6 +65,7 @@ class SysIdNode(Node):
         self.phase = 'waiting'   # → driving → (stage-1 fit) → driving → fitting → done
         self.joint_sample = None            # (received s, position, velocity)
         self.first_joint_s = None
+        self.unsafe_start = None           # why the start cannot be excited from, when not
         self.last_command_s = -math.inf
         self.samples = {'joints': [], 'commands': [], 'reference': []}   # for stage 1's fit
         self.writer = None
@@ -150,11 +151,14 @@ class SysIdNode(Node):
             self.finish(f'{others} other node(s) publish voltage_command (the controller?): '
                         'stop them first; nothing was driven')
             return
-        try:
-            self.session = Session(self.arm, self.settings, self.joint_sample[1])
-        except ValueError as error:
+        if self.unsafe_start is None:
+            try:
+                self.session = Session(self.arm, self.settings, self.joint_sample[1])
+            except ValueError as error:
+                self.unsafe_start = str(error)      # said once other publishers had time
+        if self.unsafe_start is not None:
             if now - self.first_joint_s >= UNSAFE_START_WAIT_S:
-                self.finish(f'no safe excitation: {error}')
+                self.finish(f'no safe excitation: {self.unsafe_start}')
             return
         for note in self.session.notes:
             self.get_logger().warning(f'excitation {note}')

@@ -245,12 +245,10 @@ class Planner:
         lower_bounds = [float(np.abs(goal - start).sum()) for goal in goals]
         plans = [None] * len(groups)
         if start_free:
-            # A free straight segment costs exactly the lower bound |Δθa| + |Δθb|.
-            direct = [self.segment_is_free(start, goal) for goal in goals]
             for g, members in enumerate(groups):
-                best = min(members, key=lambda k: (not direct[k], lower_bounds[k]))
-                if direct[best] and lower_bounds[best] <= min(lower_bounds[k] for k in members):
-                    plans[g] = Plan.through([start, goals[best]])
+                goal = self._straight(start, goals, members)
+                if goal is not None:
+                    plans[g] = Plan.through([start, goal])
         if all(plans):
             return plans
 
@@ -291,15 +289,12 @@ class Planner:
             if not labels[g] & source_labels:
                 plans[g] = separated
         open_groups = [g for g in open_groups if plans[g] is None]
-        if escape is not None:
-            # From the way out as from a free start, a free straight segment is the
-            # shortest path there is: no search.
+        if escape is not None:                      # from the way out as from a free start
             way_out = grid.configurations[escape]
             for g in open_groups:
-                bounds = {k: float(np.abs(goals[k] - way_out).sum()) for k in groups[g]}
-                best = min(groups[g], key=bounds.get)
-                if self.segment_is_free(way_out, goals[best]):
-                    plans[g] = Plan.through([start, way_out, goals[best]])
+                goal = self._straight(way_out, goals, groups[g])
+                if goal is not None:
+                    plans[g] = Plan.through([start, way_out, goal])
             open_groups = [g for g in open_groups if plans[g] is None]
         if not open_groups:
             return plans
@@ -332,6 +327,14 @@ class Planner:
             goal = goals[np.repeat(groups[g], [len(links[k][0]) for k in groups[g]])[target]]
             plans[g] = self._finish(start, goal, nodes, escape)
         return plans
+
+    def _straight(self, origin, goals, members):
+        """The goal of ``members`` nearest ``origin`` when the straight segment to it is free:
+        it costs exactly the lower bound |Δθa| + |Δθb|, so no path is shorter; else None."""
+        bounds = [float(np.abs(goals[k] - origin).sum()) for k in members]
+        free = [self.segment_is_free(origin, goals[k]) for k in members]
+        best = min(range(len(members)), key=lambda i: (not free[i], bounds[i]))
+        return goals[members[best]] if free[best] and bounds[best] <= min(bounds) else None
 
     def _finish(self, start, goal, nodes, escape) -> Plan:
         """The plan along the grid path ``nodes``: from the start (or its way out) to the
