@@ -18,6 +18,8 @@ from std_srvs.srv import SetBool, Trigger
 
 from arm_control import config, parameters
 from arm_control.control.events import parse_event
+from arm_control.control.goals import GoalValidator
+from arm_control.control.plans import preset_pairs
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED
@@ -136,6 +138,40 @@ def test_goals_reached_in_order_never_below_the_floor(launch, probe, arm):
                                    f'{worst_periods(probe.diagnostics)}')
     assert [s.data for s in states][-1] == 'holding'
     assert 'tracking' in [s.data for s in states]
+
+
+def diagnostic_value(diagnostics, key, node='controller'):
+    """``key``'s value in ``node``'s latest diagnostics, or None."""
+    for message in reversed(diagnostics):
+        for status_ in message.status:
+            if status_.name.endswith(node):
+                for value in status_.values:
+                    if value.key == key:
+                        return value.value
+    return None
+
+
+def test_the_first_goal_from_preset_to_preset_starts_on_its_kept_trajectory(
+        launch, probe, arm):
+    """While the arm has no goal, the controller asks the planner for every path between
+    presets and has each timed finely from rest: the first goal from one preset to another
+    then starts on that trajectory, with no quick start to refine."""
+    truth, states, events = start_arm(launch, probe)
+    pairs = len(preset_pairs(GoalValidator(arm)))
+
+    def kept():
+        return int(diagnostic_value(probe.diagnostics, 'trajectories kept') or 0)
+    assert probe.spin_until(lambda: kept() >= pairs, 90.0), f'{kept()} of {pairs} kept'
+    presets = probe.node.create_publisher(String, '/goal_preset', COMMANDS)
+    assert probe.spin_until(lambda: presets.get_subscription_count() > 0, 10.0)
+    for count, name in enumerate(('mid_score', 'stow', 'back_score'), start=1):
+        presets.publish(String(data=name))
+        assert probe.spin_until(lambda: len(reached(events)) == count, 15.0), \
+            [e.data[:300] for e in events]
+        probe.spin_for(0.3)
+    sentences = [sentence for _, _, sentence in reached(events)]
+    assert 'kept trajectory' not in sentences[0]            # from where the sim put the arm
+    assert all('kept trajectory' in sentence for sentence in sentences[1:]), sentences
 
 
 def test_services_estop_reset_cancel_enable(launch, probe, arm):

@@ -16,7 +16,8 @@ import pytest
 
 from arm_control import config
 from arm_control.control.closed_loop import ClosedLoop
-from arm_control.control.plans import PlanRequest, PlanTimer
+from arm_control.control.goals import Goal
+from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, preset_pairs
 from arm_control.control.trajectory import (refined_trajectory, time_optimal_trajectory,
                                             TrajectoryLimits)
 from arm_control.control.trajectory.bus import exact_timing
@@ -25,8 +26,10 @@ from arm_control.control.trajectory.path import BlendedPath, FINE_GRID, grid_for
 from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
 from arm_control.control.trajectory.timing import check
 from arm_control.model.dynamics import ArmDynamics
+from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.plan_worker import PlanWorker
+from arm_control.planning.planner import poses_from_waypoints, waypoints_from_poses
 
 STEP_RAD = 0.001745
 PATHS = {
@@ -185,7 +188,7 @@ def test_a_goal_that_comes_again_along_the_same_path_takes_the_kept_fine_traject
     request = PlanRequest(1, goal, start, (0.0, 0.0), None, 0.0)
     quick = timer.time_plan(request, plan, quick=True)
     assert not quick.kept
-    timer.keep(request, plan)
+    timer.kept.add(request, plan, timer.fine_from_rest(request, plan))
     again = timer.time_plan(PlanRequest(2, goal, start, (0.0, 0.0), None, 5.0), plan, quick=True)
     assert again.kept and again.trajectory.duration_s < quick.trajectory.duration_s
     assert_sound(again.trajectory, start, plan.waypoints_rad[-1], timer.dynamics,
@@ -195,6 +198,44 @@ def test_a_goal_that_comes_again_along_the_same_path_takes_the_kept_fine_traject
     elsewhere = timer.time_plan(PlanRequest(3, goal, moved, (0.0, 0.0), None, 6.0), other,
                                 quick=True)
     assert elsewhere.ok and not elsewhere.kept
+
+
+def test_a_goal_between_presets_finds_the_path_kept_for_it_after_the_round_trip(arm, planner):
+    """The node has the paths between presets kept before they are asked for
+    (``preset_pairs``). The arm then rests where its last motion ended, and the path comes
+    back from the planner as tool poses: start and waypoints differ from the kept ones by
+    rounding, and the kept trajectory is still found. From 0.001 rad away it is not."""
+    controller = config.load('controller')[1]
+    timer = PlanTimer(arm, controller)
+    kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+    presets = {name: (x, y) for name, x, y in arm.presets}
+
+    def request(start_q, name):
+        return PlanRequest(0, Goal(*presets[name], name), tuple(start_q), (0.0, 0.0), None,
+                           0.0)
+
+    def through_poses(start_q, name):               # the planner's path as PlanLink gets it
+        plan = timer.ranking.plan(planner, start_q, presets[name])
+        poses = poses_from_waypoints(kinematics, plan.waypoints_rad)
+        return PathPlan(waypoints_from_poses(kinematics, poses, start_q, timer.forbidden))
+
+    for start_q, goal_xy in preset_pairs(timer.ranking.validator):
+        if goal_xy == presets['back_score']:
+            plan = through_poses(start_q, 'back_score')
+            timer.kept.add(request(start_q, 'back_score'), plan,
+                           timer.fine_from_rest(request(start_q, 'back_score'), plan))
+    mid = timer.ranking.validator.free_configurations(*presets['mid_score'])[0]
+    to_stow = timer.time_plan(request(mid, 'stow'), through_poses(mid, 'stow'), quick=True)
+    assert to_stow.ok and not to_stow.kept
+    rest = to_stow.trajectory.sample(to_stow.trajectory.duration_s)[0]
+    onward = timer.time_plan(request(rest, 'back_score'), through_poses(rest, 'back_score'),
+                             quick=True)
+    assert onward.kept
+    assert_sound(onward.trajectory, rest, onward.trajectory.end_rad, timer.dynamics,
+                 timer.forbidden, timer.limits)
+    off = rest + np.array([0.001, 0.0])
+    assert not timer.time_plan(request(off, 'back_score'), through_poses(off, 'back_score'),
+                               quick=True).kept
 
 
 # --- the worker -----------------------------------------------------------------------------
@@ -246,9 +287,12 @@ def test_the_worker_answers_a_goal_from_rest_at_once_then_refines_and_a_moving_s
         assert not wait_for(lambda: len(answers) > before + 1, arrived, 1.0)   # nothing more
         moving = answers[before]
         assert moving.request.request_id == 2 and moving.ok and math.isnan(moving.handover_s)
-        # Idle a while after a goal from rest, the worker kept its path's fine timing: the
-        # same goal again is answered with it, and nothing more.
-        time.sleep(1.0)
+        # Its keeper timed the path of the goal from rest finely, and the worker kept it:
+        # the same goal again is answered with it, and nothing more.
+        deadline = time.monotonic() + 30.0
+        while worker.kept < 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert worker.kept >= 1
         before = len(answers)
         worker.submit(PlanRequest(3, goal, start, (0.0, 0.0), None, 20.0), plan)
         assert wait_for(lambda: len(answers) > before, arrived, 30.0)

@@ -43,7 +43,7 @@ BRANCH_SCREEN_MARGIN = 0.25
 SAME_START_RAD = 1e-6
 SAME_GOAL_M = 1e-9
 # Fine trajectories from rest kept for goals that come again along the same path.
-KEPT_TRAJECTORIES = 64
+KEPT_TRAJECTORIES = 128
 # The first waypoint of a plan may differ from the requested start by rounding only ...
 PLAN_START_TOLERANCE_RAD = 0.01
 # ... and its last must put the tool on the goal.
@@ -112,6 +112,63 @@ class Anywhere:
         return bool(free) if free.ndim == 0 else free
 
 
+class KeptTrajectories:
+    """Fine trajectories from rest, kept for the goals that come again along the same path, as
+    6328 keeps its preset-to-preset trajectories: a robot's goals come again and again, and
+    the fine trajectory then needs no quick start and no hand-over. A request finds one when
+    its goal, its start and its path's waypoints are the kept one's to within rounding: the
+    start it is asked from is the last motion's end, which went to the planner and back as a
+    tool pose."""
+
+    def __init__(self, size: int = KEPT_TRAJECTORIES):
+        self.size = size
+        self._entries = OrderedDict()       # (goal x, y) -> [(start, waypoints, trajectory)]
+
+    def __len__(self) -> int:
+        return sum(len(entries) for entries in self._entries.values())
+
+    @staticmethod
+    def keepable(request: PlanRequest, plan) -> bool:
+        """A plan from rest that has a path."""
+        return request.start_time_s is None and plan is not None and plan.ok
+
+    def find(self, request: PlanRequest, plan):
+        if not self.keepable(request, plan):
+            return None
+        start = np.asarray(request.start_q, float)
+        waypoints = np.asarray(plan.waypoints_rad, float)
+        for kept_start, kept_waypoints, trajectory in self._entries.get(request.goal.xy, ()):
+            if (kept_waypoints.shape == waypoints.shape
+                    and np.max(np.abs(kept_start - start)) <= SAME_START_RAD
+                    and np.max(np.abs(kept_waypoints - waypoints)) <= SAME_START_RAD):
+                self._entries.move_to_end(request.goal.xy)
+                return trajectory
+        return None
+
+    def add(self, request: PlanRequest, plan, trajectory) -> None:
+        if trajectory is None or self.find(request, plan) is not None:
+            return
+        entries = self._entries.setdefault(request.goal.xy, [])
+        entries.append((np.asarray(request.start_q, float),
+                        np.array(plan.waypoints_rad, float), trajectory))
+        self._entries.move_to_end(request.goal.xy)
+        while len(self) > self.size:
+            oldest = next(iter(self._entries))
+            self._entries[oldest].pop(0)
+            if not self._entries[oldest]:
+                del self._entries[oldest]
+
+
+def preset_pairs(validator: GoalValidator) -> list:
+    """(start configuration, goal (x, y)) of every move between two presets: each free elbow
+    branch of each preset as the start, toward every other preset."""
+    presets = [(x, y) for _, x, y in validator.arm.presets]
+    return [(start_q, goal_xy)
+            for x, y in presets
+            for start_q in validator.free_configurations(x, y)
+            for goal_xy in presets if goal_xy != (x, y)]
+
+
 class PlanTimer:
     """Checks and times plans for one arm and controller configuration."""
 
@@ -123,19 +180,17 @@ class PlanTimer:
         self.clear_space = ForbiddenSpace(arm, arm.world.clearance_rad)
         self.limits = TrajectoryLimits.from_config(arm, config)
         self.ranking = BranchRanking(arm)
-        self._kept = OrderedDict()          # (start, goal, waypoints): fine from rest
+        self.kept = KeptTrajectories()
 
     def time_plan(self, request: PlanRequest, plan, quick: bool = False) -> TimedPlan:
         """Check ``plan`` (anything with ``ok``, ``reason`` and ``waypoints_rad``) against the
         request and time it; ``quick``: from rest, on few stages and not bent (``refine``
         makes it better from a little later) -- or, for a goal that comes again from rest
-        along the same path, the fine trajectory kept from the last time (``keep``)."""
+        along the same path, the fine trajectory kept from the last time (``kept``)."""
         started = time.perf_counter()
-        key = self._key(request, plan)
-        if key in self._kept:
-            self._kept.move_to_end(key)
-            return TimedPlan(request, self._kept[key], compute_s=time.perf_counter() - started,
-                             kept=True)
+        kept = self.kept.find(request, plan)
+        if kept is not None:
+            return TimedPlan(request, kept, compute_s=time.perf_counter() - started, kept=True)
         try:
             trajectory, reason = self._time(request, plan, quick)
         except TrajectoryError as error:
@@ -143,27 +198,13 @@ class PlanTimer:
             reason = f'no trajectory along the plan to {request.goal.label}: {error}'
         return TimedPlan(request, trajectory, reason, time.perf_counter() - started)
 
-    def keep(self, request: PlanRequest, plan) -> None:
-        """Time ``plan`` finely from rest and keep it for the next goal along the same path,
-        as 6328 keeps its preset-to-preset trajectories: a robot's goals come again and
-        again, and the fine trajectory then needs no quick start and no hand-over."""
-        key = self._key(request, plan)
-        if key is None or key in self._kept:
-            return
-        timed = self.time_plan(request, plan)
-        if timed.ok:
-            self._kept[key] = timed.trajectory
-            while len(self._kept) > KEPT_TRAJECTORIES:
-                self._kept.popitem(last=False)
-
-    @staticmethod
-    def _key(request: PlanRequest, plan):
-        """What a kept trajectory is for: a goal from rest, its start and the path (None for
-        a moving start or no plan)."""
-        if request.start_time_s is not None or plan is None or not plan.ok:
+    def fine_from_rest(self, request: PlanRequest, plan):
+        """The fine trajectory of ``plan`` from rest, to keep (``KeptTrajectories``), or None:
+        not a plan from rest, or no trajectory along it."""
+        if not KeptTrajectories.keepable(request, plan):
             return None
-        waypoints = np.asarray(plan.waypoints_rad, float)
-        return (tuple(request.start_q), tuple(request.goal.xy), waypoints.tobytes())
+        timed = self.time_plan(request, plan)
+        return timed.trajectory if timed.ok else None
 
     def refine(self, quick: TimedPlan, handover_s: float) -> Optional[TimedPlan]:
         """The answer that takes over from ``quick``'s trajectory ``handover_s`` after its
@@ -291,11 +332,7 @@ class PresetAnswers:
 
     def __init__(self, ranking: BranchRanking, planner):
         self.ranking, self.planner = ranking, planner
-        presets = [(x, y) for _, x, y in ranking.validator.arm.presets]
-        self.pending = [(start_q, goal_xy)
-                        for x, y in presets
-                        for start_q in ranking.validator.free_configurations(x, y)
-                        for goal_xy in presets if goal_xy != (x, y)]
+        self.pending = preset_pairs(ranking.validator)
         self._answers = []                     # (start_q, goal_xy, plan)
 
     @property

@@ -251,11 +251,15 @@ class ControllerNode(Node):
         return reading is not None and reading[0].sampled_s >= now_s - 1e-6
 
     def watch_planner(self) -> None:
-        """Tell the core when the planner (and the timing worker) comes or goes."""
+        """Tell the core when the planner (and the timing worker) comes or goes; with no
+        goal, have the next path between presets kept."""
         ready = self.plans.ready()
         if ready != self.planner_ready:
             self.planner_ready = ready
             self.command(self.core.on_planner_available, ready)
+        with self.lock:
+            idle = not self.core.pending_goals()
+        self.plans.keep_presets(idle)
 
     def warn_bad(self, message: str) -> None:
         self.bad_inputs += 1
@@ -349,6 +353,7 @@ class ControllerNode(Node):
             # On one clock (one host, or sim time): how late the readings come to the loop.
             'joint_states age worst (ms)': f'{1000 * max(ages, default=math.nan):.1f}',
             'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner),
+            'trajectories kept': self.plans.worker.kept,
             'loop scheduling': self.loop.priority_problem or (
                 f'SCHED_FIFO {self.loop.realtime_priority}' if self.loop.realtime_priority
                 else 'normal')})

@@ -4,6 +4,10 @@ A request goes to the planner node as GetPlan (start = the tool pose to plan fro
 the point); its answer, turned back into joint waypoints, goes to the worker process
 (``PlanWorker``) to be checked and timed; the TimedPlan comes back through ``on_timed``, in
 the worker's result thread. A broken or empty answer comes back at once, with the reason.
+
+While the arm has no goal, the paths between presets are asked for too, one at a time, and
+handed to the worker's keeper alone (``keep_presets``): the first goal from a preset to
+another then starts on its fine trajectory.
 """
 
 from dataclasses import replace
@@ -12,7 +16,8 @@ import time
 
 from nav_msgs.srv import GetPlan
 
-from arm_control.control.plans import PathPlan, TimedPlan
+from arm_control.control.goals import Goal, GoalValidator
+from arm_control.control.plans import PathPlan, PlanRequest, preset_pairs, TimedPlan
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes import messages
@@ -45,6 +50,8 @@ class PlanLink:
         self.answered_s = {}                 # request id -> when the planner answered
         self.found = False                   # the client reaches the planner
         self.heard = False                   # ... and the planner has answered since
+        self.presets_to_keep = self._preset_requests(arm)
+        self.preset_call = None              # the open call for one of them, and when
 
     def now_s(self) -> float:
         return self.node.get_clock().now().nanoseconds * 1e-9
@@ -72,13 +79,54 @@ class PlanLink:
         for request in requests:
             self._call(request, 1)
 
-    def _call(self, request, sends: int) -> None:
+    def keep_presets(self, idle: bool) -> None:
+        """When ``idle`` (no goal, nothing being planned) and the planner is there, ask for
+        the next path between presets; its answer goes to the keeper."""
+        if self.preset_call is not None:
+            future, sent_s = self.preset_call
+            if time.monotonic() - sent_s <= 2.0 * self.planner_timeout_s:
+                return
+            self.client.remove_pending_request(future)      # a planner gone meanwhile
+            self.preset_call = None
+        if not (idle and self.presets_to_keep and self.found
+                and self.worker.ready.is_set() and not self.busy()):
+            return
+        request = self.presets_to_keep.pop(0)
+        future = self.client.call_async(self._message(request))
+        self.preset_call = (future, time.monotonic())
+        future.add_done_callback(lambda done, r=request: self._preset_answered(r, done))
+
+    def _preset_answered(self, request, future) -> None:
+        if self.preset_call is None or self.preset_call[0] is not future:
+            return                                          # given up on
+        self.preset_call = None
+        try:
+            waypoints = waypoints_from_poses(self.kinematics,
+                                             messages.poses_of(future.result().plan),
+                                             request.start_q, self.forbidden)
+        except Exception:                   # a broken answer: timed when asked
+            return
+        if len(waypoints) >= 2:             # none: the planner found no path
+            self.worker.keep(request, PathPlan(waypoints))
+
+    @staticmethod
+    def _preset_requests(arm) -> list:
+        """A request from rest for each move between presets (``preset_pairs``)."""
+        names = {(x, y): name for name, x, y in arm.presets}
+        return [PlanRequest(0, Goal(*goal_xy, names[goal_xy]),
+                            tuple(float(a) for a in start_q), (0.0, 0.0), None, 0.0)
+                for start_q, goal_xy in preset_pairs(GoalValidator(arm))]
+
+    def _message(self, request) -> GetPlan.Request:
         header = messages.header(self.node.get_clock().now().to_msg())
         message = GetPlan.Request()
         message.start = messages.pose_stamped(*self.kinematics.tool_pose(request.start_q),
                                               header)
         message.goal = messages.pose_stamped(*request.goal.xy, 0.0, header)
-        future = self.client.call_async(message)
+        return message
+
+    def _call(self, request, sends: int) -> None:
+        future = self.client.call_async(self._message(request))
         self.calls[future] = (time.monotonic(), request, sends)
         future.add_done_callback(lambda done, r=request: self._answered(r, done))
 
@@ -124,6 +172,7 @@ class PlanLink:
 
     def retune(self, arm, config) -> None:
         self.worker.retune(arm, config)
+        self.presets_to_keep = self._preset_requests(arm)      # kept ones are gone
 
     def close(self) -> None:
         self.worker.close()

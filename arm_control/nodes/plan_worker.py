@@ -12,14 +12,20 @@ process goes.
 A plan from rest is answered twice: first a quick trajectory the arm starts on at once, then
 its refinement (``PlanTimer.refine``) from a hand-over time a safe margin past when the
 refinement is expected to be ready -- unless a newer request is already waiting -- and,
-when it took so long that it surely came too late, once more from later on. Once no request
-has come for a while, it times each such path finely from rest and keeps it
-(``PlanTimer.keep``): the next goal from rest along the same path is answered with that
-trajectory at once, with nothing to refine. At start-up, once ready, the worker answers a
-move between two presets for itself, so the first goal finds its caches warm.
+when it took so long that it surely came too late, once more from later on. At start-up,
+once ready, the worker answers a move between two presets for itself, so the first goal
+finds its caches warm.
+
+Each path answered from rest then goes to the keeper, a second process at nice
+``KEEPER_NICE``, which times it finely from rest; the worker keeps what comes back
+(``KeptTrajectories``), and the next goal from rest along the same path is answered with it
+at once, with nothing to refine. The node hands the keeper the planner's paths between
+presets too, while the arm has no goal (``PlanLink``), so a robot's preset-to-preset goals
+find theirs kept from the first. The keeper takes only the CPU the others leave: a goal
+never waits for it.
 """
 
-from multiprocessing.connection import Connection
+from multiprocessing.connection import Connection, wait
 import os
 import signal
 import subprocess
@@ -31,7 +37,8 @@ import numpy as np
 
 from arm_control.config import ArmConfig
 from arm_control.control.goals import Goal
-from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
+from arm_control.control.plans import (KEPT_TRAJECTORIES, PathPlan, PlanRequest, PlanTimer,
+                                       TimedPlan)
 from arm_control.control.trajectory.moving_start import toppra_solver
 
 
@@ -45,10 +52,9 @@ MIN_HANDOVER_S = 0.03
 HANDOVER_SHARE = 0.4
 # A refinement that came too late is tried once more from later on, up to this share.
 RETRY_SHARE = 0.7
-# Paths from rest are timed finely and kept (``PlanTimer.keep``) once no request has come
-# for this long (s), the latest first, at most this many waiting.
-KEEP_WHEN_IDLE_S = 0.1
-KEEP_QUEUE = 8
+# The keeper's niceness: below the worker, the planner and everything else at normal priority
+# (under two busy loops it still gets about a tenth of a core).
+KEEPER_NICE = 10
 FIRST_RATIO = 12.0
 RATIO_MEMORY = 0.7
 
@@ -73,40 +79,90 @@ class HandoverClock:
 def _serve(requests: Connection, results: Connection) -> None:
     """The worker: (arm, config) first, then time each (request, plan) that comes in and
     send back the TimedPlan (from rest: the quick one, then its refinement), then the
-    request's id: done with it; new (arm, config) when the settings change at run time."""
-    timer = None
+    request's id: done with it; ('keep', request, plan): a path for the keeper only; new
+    (arm, config) when the settings change at run time. What the keeper sends back is kept,
+    and the count sent as ('kept', count)."""
+    timer, keeper = None, None
     clock = HandoverClock()
-    to_keep = []                    # (request, plan): timed finely and kept when idle
+    generation = 0                  # the settings' version: a keeper's answer is for one
+    try:
+        while True:
+            sources = [requests] if keeper is None else [requests, keeper.results]
+            if requests not in wait(sources):
+                try:
+                    done = keeper.results.recv()
+                except (EOFError, OSError):     # keeping stops; answering goes on
+                    keeper = None
+                    continue
+                if done[0] == generation:
+                    timer.kept.add(*done[1:])
+                    results.send(('kept', len(timer.kept)))
+                continue
+            try:
+                item = requests.recv()
+            except (EOFError, OSError):
+                return
+            if item is None:
+                return
+            if isinstance(item[0], ArmConfig):
+                first = timer is None
+                timer, generation = PlanTimer(*item), generation + 1
+                if first:
+                    results.send(None)                      # ready
+                    keeper = _Child('--keeper', nice=KEEPER_NICE)
+                    # The moving-start solver's import (0.8 s) done meanwhile, not at the
+                    # first goal that preempts another.
+                    threading.Thread(target=toppra_solver, daemon=True).start()
+                    _warm_up(timer, clock)
+                _to_keeper(keeper, ('settings', generation, item))
+                continue
+            if item[0] == 'keep':
+                if timer.kept.find(*item[1:]) is None:
+                    _to_keeper(keeper, (generation,) + item[1:])
+                continue
+            if _answer(timer, clock, *item, results.send, requests.poll):
+                _to_keeper(keeper, (generation,) + item)
+            results.send(item[0].request_id)
+    finally:
+        if keeper is not None:
+            keeper.close()
+
+
+def _to_keeper(keeper, item) -> None:
+    if keeper is not None:
+        try:
+            keeper.requests.send(item)
+        except (OSError, ValueError):       # gone: nothing more is kept
+            pass
+
+
+def _keep(requests: Connection, results: Connection) -> None:
+    """The keeper: ('settings', generation, (arm, config)), then (generation, request, plan)
+    to time finely from rest, the latest first; sends back (generation, request, plan,
+    trajectory) for each it could time."""
+    timer, generation, waiting = None, 0, []
     while True:
         try:
-            if to_keep and not requests.poll(KEEP_WHEN_IDLE_S):
-                _keep(timer, *to_keep.pop())
-                continue
-            item = requests.recv()
+            while not waiting or requests.poll():
+                item = requests.recv()
+                if item is None:
+                    return
+                if item[0] == 'settings':
+                    _, generation, settings = item
+                    timer, waiting = PlanTimer(*settings), []
+                else:
+                    waiting = (waiting + [item])[-KEPT_TRAJECTORIES:]
         except (EOFError, OSError):
             return
-        if item is None:
-            return
-        if isinstance(item[0], ArmConfig):
-            first = timer is None
-            timer, to_keep = PlanTimer(*item), []
-            if first:
-                results.send(None)                      # ready
-                # The moving-start solver's import (0.8 s) done meanwhile, not at the first
-                # goal that preempts another.
-                threading.Thread(target=toppra_solver, daemon=True).start()
-                _warm_up(timer, clock)
+        item_generation, request, plan = waiting.pop()
+        if item_generation != generation:
             continue
-        if _answer(timer, clock, *item, results.send, requests.poll):
-            to_keep = (to_keep + [item])[-KEEP_QUEUE:]
-        results.send(item[0].request_id)
-
-
-def _keep(timer: PlanTimer, request: PlanRequest, plan) -> None:
-    try:
-        timer.keep(request, plan)           # for the next goal along this path
-    except Exception:                       # that one is timed afresh
-        pass
+        try:
+            trajectory = timer.fine_from_rest(request, plan)
+        except Exception:                   # that path is timed afresh each time
+            trajectory = None
+        if trajectory is not None:
+            results.send((generation, request, plan, trajectory))
 
 
 def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, send,
@@ -171,20 +227,42 @@ def _warm_up(timer: PlanTimer, clock: HandoverClock) -> None:
                 lambda timed: None, lambda: False)
 
 
-class PlanWorker:
-    """The parent's side: ``submit`` a plan; ``on_timed(TimedPlan)`` is called from a thread
-    of its own when it is timed; ``busy`` while a plan submitted is not done with."""
+class _Child:
+    """``python -m arm_control.nodes.plan_worker`` (with ``args``, at ``nice``), pickles over
+    its stdin (``requests``) and stdout (``results``)."""
 
-    def __init__(self, arm, config, on_timed):
+    def __init__(self, *args, nice: int = 0):
         self.process = subprocess.Popen(
-            [sys.executable, '-m', 'arm_control.nodes.plan_worker'],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE)
-        self._requests = Connection(os.dup(self.process.stdin.fileno()), readable=False)
-        self._results = Connection(os.dup(self.process.stdout.fileno()), writable=False)
+            [sys.executable, '-m', 'arm_control.nodes.plan_worker', *args],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            preexec_fn=(lambda: os.nice(nice)) if nice else None)
+        self.requests = Connection(os.dup(self.process.stdin.fileno()), readable=False)
+        self.results = Connection(os.dup(self.process.stdout.fileno()), writable=False)
         self.process.stdin.close()
         self.process.stdout.close()
+
+    def close(self) -> None:
+        try:
+            self.requests.send(None)
+        except (OSError, ValueError):
+            pass
+        try:
+            self.process.wait(1.0)
+        except subprocess.TimeoutExpired:
+            self.process.terminate()
+
+
+class PlanWorker:
+    """The parent's side: ``submit`` a plan; ``on_timed(TimedPlan)`` is called from a thread
+    of its own when it is timed; ``busy`` while a plan submitted is not done with. ``keep``
+    hands a path to the keeper alone; ``kept``: how many trajectories are kept."""
+
+    def __init__(self, arm, config, on_timed):
+        self._child = _Child()
+        self.process = self._child.process
         self.on_timed = on_timed
         self.ready = threading.Event()
+        self.kept = 0
         self._send_lock = threading.Lock()
         self._open = 0                       # plans submitted, not yet done with
         self.retune(arm, config)
@@ -194,7 +272,11 @@ class PlanWorker:
     def submit(self, request: PlanRequest, plan: PathPlan) -> None:
         with self._send_lock:
             self._open += 1
-            self._requests.send((request, plan))
+            self._child.requests.send((request, plan))
+
+    def keep(self, request: PlanRequest, plan: PathPlan) -> None:
+        with self._send_lock:
+            self._child.requests.send(('keep', request, plan))
 
     @property
     def busy(self) -> bool:
@@ -203,12 +285,12 @@ class PlanWorker:
     def retune(self, arm, config) -> None:
         """Time the plans that come after this with these settings."""
         with self._send_lock:
-            self._requests.send((arm, config))
+            self._child.requests.send((arm, config))
 
     def _receive(self) -> None:
         while True:
             try:
-                timed = self._results.recv()
+                timed = self._child.results.recv()
             except (EOFError, OSError):
                 return
             if timed is None:
@@ -216,6 +298,8 @@ class PlanWorker:
             elif isinstance(timed, int):            # done with that request
                 with self._send_lock:
                     self._open -= 1
+            elif isinstance(timed, tuple):          # ('kept', count)
+                self.kept = timed[1]
             else:
                 self.on_timed(timed)
 
@@ -224,15 +308,8 @@ class PlanWorker:
         return self.process.poll() is None
 
     def close(self) -> None:
-        try:
-            with self._send_lock:
-                self._requests.send(None)
-        except (OSError, ValueError):
-            pass
-        try:
-            self.process.wait(1.0)
-        except subprocess.TimeoutExpired:
-            self.process.terminate()
+        with self._send_lock:
+            self._child.close()
 
 
 def main() -> None:
@@ -243,7 +320,7 @@ def main() -> None:
     requests = Connection(os.dup(0), writable=False)
     results = Connection(os.dup(1), readable=False)
     os.dup2(2, 1)                   # a stray print goes to the log, not into the results
-    _serve(requests, results)
+    (_keep if '--keeper' in sys.argv[1:] else _serve)(requests, results)
 
 
 if __name__ == '__main__':
