@@ -29,12 +29,14 @@ the same clock). Beside it, per move, from the configuration the arm started fro
     python bench/bench_ros.py --load           # with two busy loops beside it
     python bench/bench_ros.py --sim-speed 5    # in simulated time, 5x real time
     python bench/bench_ros.py --moves 4,5 --repeats 3
+    python bench/bench_ros.py --param feedback_voltage_reserve:=0.5
 
 Needs the package built and sourced. Not a test: it prints a table and asserts nothing.
 """
 
 import argparse
 from contextlib import nullcontext
+import dataclasses
 import math
 from pathlib import Path
 import re
@@ -176,12 +178,15 @@ def fmt(value, spec='.3f') -> str:
 
 def run(args) -> list:
     arm, controller_config = config.load('controller')
+    overrides = dict(param.split(':=', 1) for param in args.param)
+    controller_config = dataclasses.replace(controller_config, **{
+        name: float(value) for name, value in overrides.items()})
     moves = [SUITE[i] for i in args.moves] if args.moves else SUITE
-    node_args = {}
+    node_args = {'controller': tuple(arg for param in args.param for arg in ('-p', param))}
     if args.sim_speed:
         node_args = {'sim': ('-p', f'sim_time_factor:={args.sim_speed:g}'),
                      'planner': ('-p', 'use_sim_time:=true'),
-                     'controller': ('-p', 'use_sim_time:=true')}
+                     'controller': node_args['controller'] + ('-p', 'use_sim_time:=true')}
     loops = busy.start(2, LOAD_BUDGET_S) if args.load else []
     rows = []
     try:
@@ -257,7 +262,8 @@ def print_table(arm, rows, args, log_dir) -> None:
         f'{getattr(args, "clock_rate", math.nan):.2f}x, and '
         f'{getattr(args, "late_commands", "?")} commands came late for their period)'
         if args.sim_speed else 'real time',
-        f'{args.repeats} runs a move (the median)' if args.repeats > 1 else '']))
+        f'{args.repeats} runs a move (the median)' if args.repeats > 1 else '',
+        ', '.join(args.param)]))
     print(f'\nMoves through ROS ({conditions}); node logs in {log_dir}; the trajectories '
           f'between presets were kept {getattr(args, "keeping_s", math.nan):.1f} s after the '
           'controller was ready\n')
@@ -327,6 +333,9 @@ def main():
                         help='indices into the suite, e.g. 4,5')
     parser.add_argument('--repeats', type=int, default=1, help='runs of each move')
     parser.add_argument('--domain', type=int, help='a ROS domain reserved for you')
+    parser.add_argument('--param', action='append', default=[],
+                        help="a numeric controller parameter, 'name:=value' (repeatable), "
+                             'for the node and the one-process run alike')
     run(parser.parse_args())
 
 

@@ -11,7 +11,8 @@ For each move of the default arm (start and goal points in arm_base): the planne
   voltage, the peak motor current, and the share of samples the motor controllers would
   have to lower (clipped); its lowest point;
 - unshaped: the same on the planner's path as it is (``reshape=False``): what reshaping gains;
-- no reserve: reshaped and timed with the whole supply both ways: what the reserves cost;
+- half reserve, no reserve: reshaped and timed with half the feedback reserve, and with the
+  whole supply both ways: what the reserves cost;
 - ideal supply: the controller's limits on an ideal supply (no current limit, no battery
   resistance): what the electrical limits cost, and the figure to compare with the timing
   of a 12 V-only planner;
@@ -225,13 +226,20 @@ def column_unshaped(move: Move) -> dict:
     return {'unshaped s': f'{trajectory.duration_s:.3f}'}
 
 
-def column_no_reserve(move: Move) -> dict:
-    """The same path and method with the whole supply both ways."""
-    whole = TrajectoryLimits.from_config(move.arm, dataclasses.replace(
-        move.controller, feedback_voltage_reserve=0.0, driving_voltage_reserve=0.0))
-    trajectory = time_optimal_trajectory(move.waypoints, move.dynamics, move.forbidden, whole)
-    move.results['no_reserve_s'] = trajectory.duration_s
-    return {'no reserve s': f'{trajectory.duration_s:.3f}'}
+def column_reserves(move: Move) -> dict:
+    """The same path and method with half the braking reserve, and with the whole supply
+    both ways: what the reserves cost."""
+    out = {}
+    for key, label, share in (('half_reserve_s', 'half reserve', 0.5),
+                              ('no_reserve_s', 'no reserve', 0.0)):
+        limits = TrajectoryLimits.from_config(move.arm, dataclasses.replace(
+            move.controller, driving_voltage_reserve=0.0,
+            feedback_voltage_reserve=share * move.controller.feedback_voltage_reserve))
+        trajectory = time_optimal_trajectory(move.waypoints, move.dynamics, move.forbidden,
+                                             limits)
+        move.results[key] = trajectory.duration_s
+        out[f'{label} s'] = f'{trajectory.duration_s:.3f}'
+    return out
 
 
 def ideal_supply(arm):
@@ -264,6 +272,7 @@ def column_minimum_time(move: Move) -> dict:
     out['last change'] = f'{100 * change:.2f} %' + ('' if change <= ocp.CONVERGED else ' (!)')
     out['solve s'] = f'{solve_s:.1f}'
     for key, label in (('traj_s', 'traj/min'), ('unshaped_s', 'unshaped/min'),
+                       ('half_reserve_s', 'half reserve/min'),
                        ('no_reserve_s', 'no reserve/min')):
         out[label] = f'{move.results[key] / best:.3f}'
     return out
@@ -289,7 +298,7 @@ def column_preempted(move: Move) -> dict:
             'preempt peak A': cells['preempt peak A']}
 
 
-COLUMNS = [column_path, column_trajectory, column_unshaped, column_no_reserve,
+COLUMNS = [column_path, column_trajectory, column_unshaped, column_reserves,
            column_ideal_supply, column_minimum_time, column_preempted]
 
 
