@@ -180,7 +180,8 @@ def run(args) -> list:
     arm, controller_config = config.load('controller')
     overrides = dict(param.split(':=', 1) for param in args.param)
     controller_config = dataclasses.replace(controller_config, **{
-        name: float(value) for name, value in overrides.items()})
+        name: type(getattr(controller_config, name))(float(value))
+        for name, value in overrides.items()})
     moves = [SUITE[i] for i in args.moves] if args.moves else SUITE
     node_args = {'controller': tuple(arg for param in args.param for arg in ('-p', param))}
     if args.sim_speed:
@@ -202,7 +203,7 @@ def run(args) -> list:
             try:
                 rig.start_all()
                 rig.ready(90.0)
-                args.keeping_s = wait_for_presets_kept(rig, arm)
+                args.keeping = wait_for_presets_kept(rig, arm)
                 del clock[:]
                 for name, start_xy, goal_xy in moves:
                     for _ in range(args.repeats):
@@ -242,9 +243,9 @@ def run(args) -> list:
     return rows
 
 
-def wait_for_presets_kept(rig, arm, timeout_s=120.0) -> float:
+def wait_for_presets_kept(rig, arm, timeout_s=120.0) -> str:
     """Wait until the controller has the trajectories between presets kept, as on a robot
-    that has been on for a little while; how long that took (s) since it was ready."""
+    that has been on for a little while; what it had, and when, since it was ready."""
     began = time.monotonic()
     pairs = len(preset_pairs(GoalValidator(arm)))
 
@@ -252,7 +253,8 @@ def wait_for_presets_kept(rig, arm, timeout_s=120.0) -> float:
         values = rig.node_diagnostics('/controller')
         return int(values[-1].get('trajectories kept', 0)) if values else 0
     rig.spin_until(lambda: kept() >= pairs, timeout_s)
-    return time.monotonic() - began
+    return (f'{min(kept(), pairs)} of the {pairs} trajectories between presets were kept '
+            f'{time.monotonic() - began:.1f} s after the controller was ready')
 
 
 def print_table(arm, rows, args, log_dir) -> None:
@@ -264,9 +266,8 @@ def print_table(arm, rows, args, log_dir) -> None:
         if args.sim_speed else 'real time',
         f'{args.repeats} runs a move (the median)' if args.repeats > 1 else '',
         ', '.join(args.param)]))
-    print(f'\nMoves through ROS ({conditions}); node logs in {log_dir}; the trajectories '
-          f'between presets were kept {getattr(args, "keeping_s", math.nan):.1f} s after the '
-          'controller was ready\n')
+    print(f'\nMoves through ROS ({conditions}); node logs in {log_dir}; '
+          f'{getattr(args, "keeping", "")}\n')
     print('| move | ROS s | one process s | minimum s | ROS / min | one process / min | '
           'planner round trip ms | timing ms | hand-over + waiting ms | trajectory s | '
           'delivery, tracking, settling ms | lowest mm | kept |')

@@ -11,8 +11,8 @@ For each move of the default arm (start and goal points in arm_base): the planne
   voltage, the peak motor current, and the share of samples the motor controllers would
   have to lower (clipped); its lowest point;
 - unshaped: the same on the planner's path as it is (``reshape=False``): what reshaping gains;
-- half reserve, no reserve: reshaped and timed with half the feedback reserve, and with the
-  whole supply both ways: what the reserves cost;
+- half reserve, no reserve: reshaped and timed with half the reserves, and with the whole
+  supply both ways: what the reserves cost;
 - ideal supply: the controller's limits on an ideal supply (no current limit, no battery
   resistance): what the electrical limits cost, and the figure to compare with the timing
   of a 12 V-only planner;
@@ -227,13 +227,14 @@ def column_unshaped(move: Move) -> dict:
 
 
 def column_reserves(move: Move) -> dict:
-    """The same path and method with half the braking reserve, and with the whole supply
-    both ways: what the reserves cost."""
+    """The same path and method with half the reserves, and with the whole supply both ways:
+    what the reserves cost."""
     out = {}
     for key, label, share in (('half_reserve_s', 'half reserve', 0.5),
                               ('no_reserve_s', 'no reserve', 0.0)):
         limits = TrajectoryLimits.from_config(move.arm, dataclasses.replace(
-            move.controller, driving_voltage_reserve=0.0,
+            move.controller,
+            driving_voltage_reserve=share * move.controller.driving_voltage_reserve,
             feedback_voltage_reserve=share * move.controller.feedback_voltage_reserve))
         trajectory = time_optimal_trajectory(move.waypoints, move.dynamics, move.forbidden,
                                              limits)

@@ -8,6 +8,7 @@ is still the plan; through the worker the quick answer comes first, then the ref
 """
 
 import math
+import multiprocessing
 import threading
 import time
 
@@ -17,7 +18,8 @@ import pytest
 from arm_control import config
 from arm_control.control.closed_loop import ClosedLoop
 from arm_control.control.goals import Goal
-from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, preset_pairs
+from arm_control.control.plans import (KeptTrajectories, PathPlan, PlanRequest, PlanTimer,
+                                       preset_pairs)
 from arm_control.control.trajectory import (refined_trajectory, time_optimal_trajectory,
                                             TrajectoryLimits)
 from arm_control.control.trajectory.bus import exact_timing
@@ -28,7 +30,7 @@ from arm_control.control.trajectory.timing import check
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
-from arm_control.nodes.plan_worker import PlanWorker
+from arm_control.nodes.plan_worker import _Incoming, PlanWorker
 from arm_control.planning.planner import poses_from_waypoints, waypoints_from_poses
 
 STEP_RAD = 0.001745
@@ -177,7 +179,7 @@ def test_a_refinement_of_a_motion_a_new_goal_took_over_from_is_ignored(arm, plan
 
 def test_a_goal_that_comes_again_along_the_same_path_takes_the_kept_fine_trajectory(arm,
                                                                                     planner):
-    """Kept (``PlanTimer.keep``), the fine timing from rest answers the same goal from the same
+    """Kept (``KeptTrajectories``), the fine timing from rest answers the same goal from the same
     start along the same path at once, sound, and sooner than the quick one; any other
     start is timed afresh."""
     controller = config.load('controller')[1]
@@ -219,23 +221,65 @@ def test_a_goal_between_presets_finds_the_path_kept_for_it_after_the_round_trip(
         poses = poses_from_waypoints(kinematics, plan.waypoints_rad)
         return PathPlan(waypoints_from_poses(kinematics, poses, start_q, timer.forbidden))
 
+    kept_starts = []
     for start_q, goal_xy in preset_pairs(timer.ranking.validator):
         if goal_xy == presets['back_score']:
             plan = through_poses(start_q, 'back_score')
             timer.kept.add(request(start_q, 'back_score'), plan,
-                           timer.fine_from_rest(request(start_q, 'back_score'), plan))
+                           timer.fine_from_rest(request(start_q, 'back_score'), plan), True)
+            kept_starts.append(np.asarray(start_q, float))
     mid = timer.ranking.validator.free_configurations(*presets['mid_score'])[0]
     to_stow = timer.time_plan(request(mid, 'stow'), through_poses(mid, 'stow'), quick=True)
     assert to_stow.ok and not to_stow.kept
     rest = to_stow.trajectory.sample(to_stow.trajectory.duration_s)[0]
-    onward = timer.time_plan(request(rest, 'back_score'), through_poses(rest, 'back_score'),
-                             quick=True)
-    assert onward.kept
-    assert_sound(onward.trajectory, rest, onward.trajectory.end_rad, timer.dynamics,
+    # Where the arm rests is a kept start only to within rounding (not the same floats).
+    apart = min(np.max(np.abs(rest - start)) for start in kept_starts)
+    assert 0.0 < apart <= 1e-6
+    path = through_poses(rest, 'back_score')
+    onward = timer.time_plan(request(rest, 'back_score'), path, quick=True)
+    assert onward.ok and onward.kept
+    assert_sound(onward.trajectory, rest, path.waypoints_rad[-1], timer.dynamics,
                  timer.forbidden, timer.limits)
     off = rest + np.array([0.001, 0.0])
-    assert not timer.time_plan(request(off, 'back_score'), through_poses(off, 'back_score'),
-                               quick=True).kept
+    elsewhere = timer.time_plan(request(off, 'back_score'), through_poses(off, 'back_score'),
+                                quick=True)
+    assert elsewhere.ok and not elsewhere.kept
+
+
+def test_trajectories_between_presets_stay_kept_however_many_other_goals_come(arm, planner):
+    """The store keeps the last goals' trajectories up to its size, and those between presets
+    for good: a robot sent to many points still finds its presets' moves kept."""
+    controller = config.load('controller')[1]
+    timer = PlanTimer(arm, controller)
+    store = KeptTrajectories(size=2)
+    start = (1.5708, -1.5708)
+
+    def kept_for(x, y, pinned):
+        goal = timer.ranking.validator.check(x, y, 0.0, '', 'goal').goal
+        request = PlanRequest(0, goal, start, (0.0, 0.0), None, 0.0)
+        plan = timer.ranking.plan(planner, start, goal.xy)
+        store.add(request, plan, timer.fine_from_rest(request, plan), pinned)
+        return request, plan
+    preset = kept_for(-1.0, 1.0, pinned=True)
+    others = [kept_for(x, 1.0, pinned=False) for x in (0.6, 0.8, 1.0)]
+    assert len(store) == 3
+    assert store.find(*preset) is not None
+    assert store.find(*others[0]) is None                  # the oldest of the others went
+    assert all(store.find(*other) is not None for other in others[1:])
+
+
+def test_the_worker_sees_a_newer_goal_behind_a_path_for_the_keeper_only():
+    """A goal's refinement is skipped only for a newer request to answer: a path between
+    presets sent for the keeper meanwhile is not one, and nothing is lost by looking."""
+    receiving, sending = multiprocessing.Pipe(duplex=False)
+    incoming = _Incoming(receiving)
+    sending.send(('keep', 'request', 'plan'))
+    assert not incoming.newer()
+    sending.send(('request', 'plan'))
+    assert incoming.newer()
+    assert incoming.next() == ('keep', 'request', 'plan')
+    assert incoming.next() == ('request', 'plan')
+    assert not incoming.waiting
 
 
 # --- the worker -----------------------------------------------------------------------------

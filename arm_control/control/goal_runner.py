@@ -182,7 +182,7 @@ class GoalRunner:
         asked = timed.request.sent_time_s
         answered = timed.answered_s if math.isfinite(timed.answered_s) else asked
         received = timed.received_s if math.isfinite(timed.received_s) else now_s
-        timing = 'kept trajectory' if timed.kept else 'timing'     # PlanTimer.keep
+        timing = 'kept trajectory' if timed.kept else 'timing'     # KeptTrajectories
         return {'planner round trip': answered - asked, timing: timed.compute_s,
                 'hand-over': max(received - answered - timed.compute_s, 0.0),
                 'waiting to start': begin_s - received, 'trajectory': timed.trajectory.duration_s}

@@ -38,11 +38,13 @@ from arm_control.model.world import ForbiddenSpace
 
 # Branches whose quick estimate is within this fraction of the best one's are timed in full.
 BRANCH_SCREEN_MARGIN = 0.25
-# A request is one worked out ahead (``PresetAnswers``) when its start is within this of that
+# A request is one worked out ahead (``PresetAnswers``), or finds a kept trajectory
+# (``KeptTrajectories``: its path's waypoints too), when its start is within this of that
 # one's (the pose it travels as rounds the angles) and its goal within this.
 SAME_START_RAD = 1e-6
 SAME_GOAL_M = 1e-9
-# Fine trajectories from rest kept for goals that come again along the same path.
+# Fine trajectories from rest kept for goals that come again along the same path (besides
+# those between presets, kept for good).
 KEPT_TRAJECTORIES = 128
 # The first waypoint of a plan may differ from the requested start by rounding only ...
 PLAN_START_TOLERANCE_RAD = 0.01
@@ -86,7 +88,7 @@ class TimedPlan:
     clock) -- where a goal's time goes, before the arm moves. ``handover_s`` (NaN: none):
     this answer refines the motion taken for the same request, from this long after that
     motion's start. ``kept``: the fine trajectory kept from an earlier goal along the same
-    path (``PlanTimer.keep``), which needs no refinement.
+    path (``KeptTrajectories``), which needs no refinement.
     """
 
     request: PlanRequest
@@ -115,48 +117,59 @@ class Anywhere:
 class KeptTrajectories:
     """Fine trajectories from rest, kept for the goals that come again along the same path, as
     6328 keeps its preset-to-preset trajectories: a robot's goals come again and again, and
-    the fine trajectory then needs no quick start and no hand-over. A request finds one when
-    its goal, its start and its path's waypoints are the kept one's to within rounding: the
-    start it is asked from is the last motion's end, which went to the planner and back as a
-    tool pose."""
+    the fine trajectory then needs no quick start and no hand-over. A request finds one for
+    its very goal whose start and path's waypoints are the kept one's to within rounding:
+    the start it is asked from is the last motion's end, which went to the planner and back
+    as a tool pose. Those between presets are ``pinned`` (kept for good); of the others the
+    ``size`` used last."""
 
     def __init__(self, size: int = KEPT_TRAJECTORIES):
         self.size = size
-        self._entries = OrderedDict()       # (goal x, y) -> [(start, waypoints, trajectory)]
+        self._pinned = {}                   # goal (x, y) -> [(start, waypoints, trajectory)]
+        self._recent = OrderedDict()        # the same, the goal used last at the end
 
     def __len__(self) -> int:
-        return sum(len(entries) for entries in self._entries.values())
+        return sum(len(entries) for store in (self._pinned, self._recent)
+                   for entries in store.values())
 
     @staticmethod
     def keepable(request: PlanRequest, plan) -> bool:
         """A plan from rest that has a path."""
         return request.start_time_s is None and plan is not None and plan.ok
 
-    def find(self, request: PlanRequest, plan):
+    def find(self, request: PlanRequest, plan, touch: bool = True):
+        """The trajectory kept for ``request`` along ``plan``, or None; ``touch``: counts as
+        used."""
         if not self.keepable(request, plan):
             return None
         start = np.asarray(request.start_q, float)
         waypoints = np.asarray(plan.waypoints_rad, float)
-        for kept_start, kept_waypoints, trajectory in self._entries.get(request.goal.xy, ()):
-            if (kept_waypoints.shape == waypoints.shape
-                    and np.max(np.abs(kept_start - start)) <= SAME_START_RAD
-                    and np.max(np.abs(kept_waypoints - waypoints)) <= SAME_START_RAD):
-                self._entries.move_to_end(request.goal.xy)
-                return trajectory
+        goal = request.goal.xy
+        for store in (self._pinned, self._recent):
+            for kept_start, kept_waypoints, trajectory in store.get(goal, ()):
+                if (kept_waypoints.shape == waypoints.shape
+                        and np.max(np.abs(kept_start - start)) <= SAME_START_RAD
+                        and np.max(np.abs(kept_waypoints - waypoints)) <= SAME_START_RAD):
+                    if touch and store is self._recent:
+                        self._recent.move_to_end(goal)
+                    return trajectory
         return None
 
-    def add(self, request: PlanRequest, plan, trajectory) -> None:
-        if trajectory is None or self.find(request, plan) is not None:
+    def add(self, request: PlanRequest, plan, trajectory, pinned: bool = False) -> None:
+        if trajectory is None or self.find(request, plan, touch=False) is not None:
             return
-        entries = self._entries.setdefault(request.goal.xy, [])
-        entries.append((np.asarray(request.start_q, float),
-                        np.array(plan.waypoints_rad, float), trajectory))
-        self._entries.move_to_end(request.goal.xy)
-        while len(self) > self.size:
-            oldest = next(iter(self._entries))
-            self._entries[oldest].pop(0)
-            if not self._entries[oldest]:
-                del self._entries[oldest]
+        store = self._pinned if pinned else self._recent
+        store.setdefault(request.goal.xy, []).append(
+            (np.asarray(request.start_q, float), np.array(plan.waypoints_rad, float),
+             trajectory))
+        if pinned:
+            return
+        self._recent.move_to_end(request.goal.xy)
+        while sum(len(entries) for entries in self._recent.values()) > self.size:
+            oldest = next(iter(self._recent))
+            self._recent[oldest].pop(0)
+            if not self._recent[oldest]:
+                del self._recent[oldest]
 
 
 def preset_pairs(validator: GoalValidator) -> list:

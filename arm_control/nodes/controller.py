@@ -11,8 +11,8 @@ every period, ``arm_state`` (latched), ``~/setpoint``, ``~/estimate``, ``~/goal_
 
 Three threads of work: the control loop (``ControlLoop``) steps the core and commands the
 motors; the executor takes messages and services (at ``EXECUTOR_PRIORITY``, below the loop);
-a worker process times plans
-(``PlanLink``). The core is shared under a lock held only for quick calls. 0 V on exit.
+a worker process times plans, and its keeper keeps fine trajectories (``PlanLink``). The
+core is shared under a lock held only for quick calls. 0 V on exit.
 """
 
 import math
@@ -365,7 +365,6 @@ class ControllerNode(Node):
     def on_shutdown(self) -> None:
         """0 V on the way out: the arm must not keep the last command."""
         self.loop.stop()
-        self.plans.close()
         try:
             for _ in range(3):
                 self.voltage_pub.publish(Float64MultiArray(data=[0.0, 0.0]))
@@ -373,6 +372,7 @@ class ControllerNode(Node):
             self.voltage_pub.wait_for_all_acked(Duration(seconds=SHUTDOWN_ACK_S))
         except Exception as error:              # the context may already be gone
             self.get_logger().warning(f'could not send 0 V on shutdown: {error}')
+        self.plans.close()
 
 
 def controller_node() -> ControllerNode:

@@ -32,6 +32,9 @@ from arm_control.planning.planner import waypoints_from_poses
 # repeated request from its last answer. Once it has answered, a slow planner is only slow.
 RESEND_AFTER_S = 0.3
 RESENDS = 2
+# A path between presets the planner did not answer is asked for again, this many calls in
+# all.
+PRESET_CALLS = 3
 
 
 class PlanLink:
@@ -50,7 +53,7 @@ class PlanLink:
         self.answered_s = {}                 # request id -> when the planner answered
         self.found = False                   # the client reaches the planner
         self.heard = False                   # ... and the planner has answered since
-        self.presets_to_keep = self._preset_requests(arm)
+        self.presets_to_keep = self._preset_requests(arm)     # (request, calls so far)
         self.preset_call = None              # the open call for one of them, and when
 
     def now_s(self) -> float:
@@ -83,23 +86,28 @@ class PlanLink:
         """When ``idle`` (no goal, nothing being planned) and the planner is there, ask for
         the next path between presets; its answer goes to the keeper."""
         if self.preset_call is not None:
-            future, sent_s = self.preset_call
+            future, sent_s, request, calls = self.preset_call
             if time.monotonic() - sent_s <= 2.0 * self.planner_timeout_s:
                 return
-            self.client.remove_pending_request(future)      # a planner gone meanwhile
+            # Unanswered (a planner just found may not reach us yet, or gone meanwhile):
+            # asked again later, at most PRESET_CALLS times in all.
+            self.client.remove_pending_request(future)
             self.preset_call = None
-        if not (idle and self.presets_to_keep and self.found
+            if calls < PRESET_CALLS:
+                self.presets_to_keep.append((request, calls))
+        if not (idle and self.presets_to_keep and self.found and self.worker.alive
                 and self.worker.ready.is_set() and not self.busy()):
             return
-        request = self.presets_to_keep.pop(0)
+        request, calls = self.presets_to_keep.pop(0)
         future = self.client.call_async(self._message(request))
-        self.preset_call = (future, time.monotonic())
+        self.preset_call = (future, time.monotonic(), request, calls + 1)
         future.add_done_callback(lambda done, r=request: self._preset_answered(r, done))
 
     def _preset_answered(self, request, future) -> None:
         if self.preset_call is None or self.preset_call[0] is not future:
             return                                          # given up on
         self.preset_call = None
+        self.heard = self.found
         try:
             waypoints = waypoints_from_poses(self.kinematics,
                                              messages.poses_of(future.result().plan),
@@ -111,10 +119,11 @@ class PlanLink:
 
     @staticmethod
     def _preset_requests(arm) -> list:
-        """A request from rest for each move between presets (``preset_pairs``)."""
+        """A request from rest for each move between presets (``preset_pairs``), not yet
+        asked for."""
         names = {(x, y): name for name, x, y in arm.presets}
-        return [PlanRequest(0, Goal(*goal_xy, names[goal_xy]),
-                            tuple(float(a) for a in start_q), (0.0, 0.0), None, 0.0)
+        return [(PlanRequest(0, Goal(*goal_xy, names[goal_xy]),
+                             tuple(float(a) for a in start_q), (0.0, 0.0), None, 0.0), 0)
                 for start_q, goal_xy in preset_pairs(GoalValidator(arm))]
 
     def _message(self, request) -> GetPlan.Request:
@@ -168,7 +177,10 @@ class PlanLink:
         except Exception as error:
             return self._timed(TimedPlan(request, None, f'the planner answered a path that '
                                                         f'is not of this arm: {error!r}'))
-        self.worker.submit(request, PathPlan(waypoints))
+        try:
+            self.worker.submit(request, PathPlan(waypoints))
+        except (OSError, ValueError):               # the diagnostics say it is gone
+            self._timed(TimedPlan(request, None, 'the plan worker process is gone'))
 
     def retune(self, arm, config) -> None:
         self.worker.retune(arm, config)

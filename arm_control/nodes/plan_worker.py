@@ -25,6 +25,7 @@ find theirs kept from the first. The keeper takes only the CPU the others leave:
 never waits for it.
 """
 
+from collections import deque
 from multiprocessing.connection import Connection, wait
 import os
 import signal
@@ -37,8 +38,7 @@ import numpy as np
 
 from arm_control.config import ArmConfig
 from arm_control.control.goals import Goal
-from arm_control.control.plans import (KEPT_TRAJECTORIES, PathPlan, PlanRequest, PlanTimer,
-                                       TimedPlan)
+from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
 from arm_control.control.trajectory.moving_start import toppra_solver
 
 
@@ -53,8 +53,10 @@ HANDOVER_SHARE = 0.4
 # A refinement that came too late is tried once more from later on, up to this share.
 RETRY_SHARE = 0.7
 # The keeper's niceness: below the worker, the planner and everything else at normal priority
-# (under two busy loops it still gets about a tenth of a core).
+# (under two busy loops it still gets about a tenth of a core); at most this many paths wait
+# for it, the latest first.
 KEEPER_NICE = 10
+KEEPER_QUEUE = 256
 FIRST_RATIO = 12.0
 RATIO_MEMORY = 0.7
 
@@ -79,67 +81,150 @@ class HandoverClock:
 def _serve(requests: Connection, results: Connection) -> None:
     """The worker: (arm, config) first, then time each (request, plan) that comes in and
     send back the TimedPlan (from rest: the quick one, then its refinement), then the
-    request's id: done with it; ('keep', request, plan): a path for the keeper only; new
-    (arm, config) when the settings change at run time. What the keeper sends back is kept,
-    and the count sent as ('kept', count)."""
+    request's id: done with it; ('keep', request, plan): a path between presets, for the
+    keeper only; new (arm, config) when the settings change at run time. What the keeper
+    sends back is kept, and the count sent as ('kept', count)."""
     timer, keeper = None, None
     clock = HandoverClock()
+    incoming = _Incoming(requests)
     generation = 0                  # the settings' version: a keeper's answer is for one
     try:
         while True:
-            sources = [requests] if keeper is None else [requests, keeper.results]
-            if requests not in wait(sources):
-                try:
-                    done = keeper.results.recv()
-                except (EOFError, OSError):     # keeping stops; answering goes on
-                    keeper = None
-                    continue
-                if done[0] == generation:
-                    timer.kept.add(*done[1:])
-                    results.send(('kept', len(timer.kept)))
+            if not incoming.waiting and keeper is not None \
+                    and requests not in wait([requests, keeper.results]):
+                keeper = _kept(keeper, timer, generation, results)
                 continue
-            try:
-                item = requests.recv()
-            except (EOFError, OSError):
-                return
+            item = incoming.next()
             if item is None:
                 return
             if isinstance(item[0], ArmConfig):
                 first = timer is None
                 timer, generation = PlanTimer(*item), generation + 1
+                results.send(('kept', 0))
                 if first:
                     results.send(None)                      # ready
-                    keeper = _Child('--keeper', nice=KEEPER_NICE)
+                    keeper = _Keeper.start()
                     # The moving-start solver's import (0.8 s) done meanwhile, not at the
                     # first goal that preempts another.
                     threading.Thread(target=toppra_solver, daemon=True).start()
                     _warm_up(timer, clock)
-                _to_keeper(keeper, ('settings', generation, item))
+                if keeper is not None:
+                    keeper.settings(generation, item)
                 continue
             if item[0] == 'keep':
-                if timer.kept.find(*item[1:]) is None:
-                    _to_keeper(keeper, (generation,) + item[1:])
+                request, plan = item[1:]
+                if keeper is not None and timer.kept.find(request, plan, touch=False) is None:
+                    keeper.send((generation, request, plan, True))
                 continue
-            if _answer(timer, clock, *item, results.send, requests.poll):
-                _to_keeper(keeper, (generation,) + item)
-            results.send(item[0].request_id)
+            request, plan = item
+            if _answer(timer, clock, request, plan, results.send, incoming.newer) \
+                    and keeper is not None:
+                keeper.send((generation, request, plan, False))
+            results.send(request.request_id)
+    except (EOFError, OSError):     # the node is gone
+        return
     finally:
         if keeper is not None:
             keeper.close()
 
 
-def _to_keeper(keeper, item) -> None:
-    if keeper is not None:
+class _Incoming:
+    """The worker's items, read ahead when asked whether a newer request waits: a path sent
+    for the keeper alone does not count as one."""
+
+    def __init__(self, connection: Connection):
+        self.connection = connection
+        self.read = deque()
+
+    @property
+    def waiting(self) -> bool:
+        return bool(self.read)
+
+    def next(self):
+        return self.read.popleft() if self.read else self.connection.recv()
+
+    def newer(self) -> bool:
+        while self.connection.poll():
+            self.read.append(self.connection.recv())
+        return any(item is None or item[0] != 'keep' for item in self.read)
+
+
+def _kept(keeper, timer: PlanTimer, generation: int, results: Connection):
+    """Keep what the keeper sent (if timed with these settings); the keeper, or None once
+    it has gone."""
+    try:
+        done_generation, request, plan, trajectory, pinned = keeper.results.recv()
+    except (EOFError, OSError):
+        print('plan worker: the keeper process ended; fine trajectories are no longer kept',
+              file=sys.stderr, flush=True)
+        keeper.close()
+        return None
+    if done_generation == generation:
+        timer.kept.add(request, plan, trajectory, pinned)
+        results.send(('kept', len(timer.kept)))
+    return keeper
+
+
+class _Keeper:
+    """The worker's side of the keeper: paths go to it through a thread of their own, at most
+    ``KEEPER_QUEUE`` waiting (the oldest dropped), so the worker never waits on the keeper,
+    however slowly it reads."""
+
+    def __init__(self):
+        self.child = _Child('--keeper', nice=KEEPER_NICE)
+        self.results = self.child.results
+        self._outbox = deque(maxlen=KEEPER_QUEUE)
+        self._changed = threading.Condition()
+        self._open = True
+        threading.Thread(target=self._send, daemon=True, name='to the keeper').start()
+
+    @classmethod
+    def start(cls):
+        """The keeper, or None when it cannot be started (goals are answered all the same)."""
         try:
-            keeper.requests.send(item)
-        except (OSError, ValueError):       # gone: nothing more is kept
-            pass
+            return cls()
+        except OSError as error:
+            print(f'plan worker: no keeper ({error}); fine trajectories will not be kept',
+                  file=sys.stderr, flush=True)
+            return None
+
+    def send(self, item) -> None:
+        with self._changed:
+            self._outbox.append(item)
+            self._changed.notify()
+
+    def settings(self, generation: int, settings) -> None:
+        """New settings: the paths still waiting were for the old ones."""
+        with self._changed:
+            self._outbox.clear()
+            self._outbox.append(('settings', generation, settings))
+            self._changed.notify()
+
+    def _send(self) -> None:
+        while True:
+            with self._changed:
+                self._changed.wait_for(lambda: self._outbox or not self._open)
+                if not self._open:
+                    return
+                item = self._outbox.popleft()
+            try:
+                self.child.requests.send(item)
+            except (OSError, ValueError):
+                return
+
+    def close(self) -> None:
+        """Its work is disposable: stopped at once."""
+        with self._changed:
+            self._open = False
+            self._changed.notify()
+        self.child.process.kill()
+        self.child.process.wait()
 
 
 def _keep(requests: Connection, results: Connection) -> None:
-    """The keeper: ('settings', generation, (arm, config)), then (generation, request, plan)
-    to time finely from rest, the latest first; sends back (generation, request, plan,
-    trajectory) for each it could time."""
+    """The keeper: ('settings', generation, (arm, config)), then (generation, request, plan,
+    pinned) to time finely from rest, the latest first; sends back (generation, request,
+    plan, trajectory, pinned) for each it could time."""
     timer, generation, waiting = None, 0, []
     while True:
         try:
@@ -151,10 +236,10 @@ def _keep(requests: Connection, results: Connection) -> None:
                     _, generation, settings = item
                     timer, waiting = PlanTimer(*settings), []
                 else:
-                    waiting = (waiting + [item])[-KEPT_TRAJECTORIES:]
+                    waiting = (waiting + [item])[-KEEPER_QUEUE:]
         except (EOFError, OSError):
             return
-        item_generation, request, plan = waiting.pop()
+        item_generation, request, plan, pinned = waiting.pop()
         if item_generation != generation:
             continue
         try:
@@ -162,7 +247,10 @@ def _keep(requests: Connection, results: Connection) -> None:
         except Exception:                   # that path is timed afresh each time
             trajectory = None
         if trajectory is not None:
-            results.send((generation, request, plan, trajectory))
+            try:
+                results.send((generation, request, plan, trajectory, pinned))
+            except OSError:                 # the worker is gone
+                return
 
 
 def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, send,
@@ -249,7 +337,8 @@ class _Child:
         try:
             self.process.wait(1.0)
         except subprocess.TimeoutExpired:
-            self.process.terminate()
+            self.process.terminate()            # the worker's ``finally`` still runs
+            self.process.wait()
 
 
 class PlanWorker:
@@ -275,8 +364,13 @@ class PlanWorker:
             self._child.requests.send((request, plan))
 
     def keep(self, request: PlanRequest, plan: PathPlan) -> None:
-        with self._send_lock:
-            self._child.requests.send(('keep', request, plan))
+        """Have ``plan`` kept from rest before it is asked for (a path between presets, kept
+        for good); nothing when the worker is gone: keeping is optional."""
+        try:
+            with self._send_lock:
+                self._child.requests.send(('keep', request, plan))
+        except (OSError, ValueError):
+            pass
 
     @property
     def busy(self) -> bool:
@@ -317,6 +411,7 @@ def main() -> None:
     # A Ctrl-C reaches the whole process group; the controller ends the worker itself (or
     # its pipe closes when the controller dies), so the worker does not die mid-answer.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))    # the keeper stopped on the way
     requests = Connection(os.dup(0), writable=False)
     results = Connection(os.dup(1), readable=False)
     os.dup2(2, 1)                   # a stray print goes to the log, not into the results
