@@ -298,7 +298,8 @@ def test_the_worker_answers_a_goal_from_rest_at_once_then_refines_and_a_moving_s
     """From rest: the quick trajectory at once, then a refinement, which ends sooner, and a
     second from a later hand-over only when the first surely came too late. (One is left out
     when, from the hand-over the worker's clock sets, it would not end sooner: on a loaded
-    machine the hand-over comes late in the move.) A moving start: one answer."""
+    machine the hand-over comes late in the move.) A moving start: one answer. The keeper
+    keeps the path from rest only once it may work."""
     controller = config.load('controller')[1]
     answers, arrived = [], threading.Event()
 
@@ -313,6 +314,7 @@ def test_the_worker_answers_a_goal_from_rest_at_once_then_refines_and_a_moving_s
         goal = timer.ranking.validator.check(-1.0, 1.0, 0.0, '', 'back').goal
         start = (1.5708, -1.5708)
         plan = timer.ranking.plan(planner, start, goal.xy)
+        worker.allow_keeping(False)                 # as the node does while the arm moves
         worker.submit(PlanRequest(1, goal, start, (0.0, 0.0), None, 0.0), plan)
         assert wait_for(lambda: len(answers) >= 1, arrived, 30.0)
         quick = answers[0]
@@ -331,8 +333,12 @@ def test_the_worker_answers_a_goal_from_rest_at_once_then_refines_and_a_moving_s
         assert not wait_for(lambda: len(answers) > before + 1, arrived, 1.0)   # nothing more
         moving = answers[before]
         assert moving.request.request_id == 2 and moving.ok and math.isnan(moving.handover_s)
-        # Its keeper timed the path of the goal from rest finely, and the worker kept it:
-        # the same goal again is answered with it, and nothing more.
+        # Stopped, the keeper did nothing meanwhile; let work, it timed the path of the goal
+        # from rest finely, and the worker kept it: the same goal again is answered with it,
+        # and nothing more.
+        time.sleep(1.0)
+        assert worker.kept == 0
+        worker.allow_keeping(True)
         deadline = time.monotonic() + 30.0
         while worker.kept < 1 and time.monotonic() < deadline:
             time.sleep(0.05)

@@ -40,6 +40,7 @@ from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health
 from arm_control.control.latency import CommandDelay
 from arm_control.control.sensing import SensorReading
+from arm_control.control.state_machine import ArmState
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
                                       LATCHED, loop_statistics, PLANNER_AVAILABLE, run,
@@ -252,13 +253,16 @@ class ControllerNode(Node):
 
     def watch_planner(self) -> None:
         """Tell the core when the planner (and the timing worker) comes or goes; with no
-        goal, have the next path between presets kept."""
+        goal, have the next path between presets kept; the keeper works only while the arm
+        is not moved along a trajectory."""
         ready = self.plans.ready()
         if ready != self.planner_ready:
             self.planner_ready = ready
             self.command(self.core.on_planner_available, ready)
         with self.lock:
             idle = not self.core.pending_goals()
+            moving = self.core.state in (ArmState.PLANNING, ArmState.TRACKING, ArmState.DRIVER)
+        self.plans.let_keeper_work(idle and not moving)
         self.plans.keep_presets(idle)
 
     def warn_bad(self, message: str) -> None:
@@ -330,6 +334,7 @@ class ControllerNode(Node):
                           for g in pending]
             self.queue_pub.publish(path)
         if requests:
+            self.plans.let_keeper_work(False)      # a goal to plan: not while it moves
             self.plans.send(requests)
 
     @guarded

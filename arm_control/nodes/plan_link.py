@@ -55,6 +55,7 @@ class PlanLink:
         self.heard = False                   # ... and the planner has answered since
         self.presets_to_keep = self._preset_requests(arm)     # (request, calls so far)
         self.preset_call = None              # the open call for one of them, and when
+        self.keeper_working = True
 
     def now_s(self) -> float:
         return self.node.get_clock().now().nanoseconds * 1e-9
@@ -81,6 +82,12 @@ class PlanLink:
     def send(self, requests) -> None:
         for request in requests:
             self._call(request, 1)
+
+    def let_keeper_work(self, working: bool) -> None:
+        """Whether the worker's keeper may work now (said when it changes)."""
+        if working != self.keeper_working:
+            self.keeper_working = working
+            self.worker.allow_keeping(working)
 
     def keep_presets(self, idle: bool) -> None:
         """When ``idle`` (no goal, nothing being planned) and the planner is there, ask for

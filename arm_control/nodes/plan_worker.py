@@ -21,8 +21,9 @@ Each path answered from rest then goes to the keeper, a second process at nice
 (``KeptTrajectories``), and the next goal from rest along the same path is answered with it
 at once, with nothing to refine. The node hands the keeper the planner's paths between
 presets too, while the arm has no goal (``PlanLink``), so a robot's preset-to-preset goals
-find theirs kept from the first. The keeper takes only the CPU the others leave: a goal
-never waits for it.
+find theirs kept from the first. The keeper takes only the CPU the others leave, and only
+while the arm holds: the node stops it (SIGSTOP) while a goal is planned or followed, or the
+driver moves the arm. A goal never waits for it.
 """
 
 from collections import deque
@@ -82,7 +83,8 @@ def _serve(requests: Connection, results: Connection) -> None:
     """The worker: (arm, config) first, then time each (request, plan) that comes in and
     send back the TimedPlan (from rest: the quick one, then its refinement), then the
     request's id: done with it; ('keep', request, plan): a path between presets, for the
-    keeper only; new (arm, config) when the settings change at run time. What the keeper
+    keeper only; ('keeping', bool): whether the keeper may work now; new (arm, config) when
+    the settings change at run time. What the keeper
     sends back is kept, and the count sent as ('kept', count)."""
     timer, keeper = None, None
     clock = HandoverClock()
@@ -111,6 +113,10 @@ def _serve(requests: Connection, results: Connection) -> None:
                 if keeper is not None:
                     keeper.settings(generation, item)
                 continue
+            if item[0] == 'keeping':
+                if keeper is not None:
+                    keeper.allow(item[1])
+                continue
             if item[0] == 'keep':
                 request, plan = item[1:]
                 if keeper is not None and timer.kept.find(request, plan, touch=False) is None:
@@ -130,7 +136,7 @@ def _serve(requests: Connection, results: Connection) -> None:
 
 class _Incoming:
     """The worker's items, read ahead when asked whether a newer request waits: a path sent
-    for the keeper alone does not count as one."""
+    for the keeper alone, or word on when it may work, does not count as one."""
 
     def __init__(self, connection: Connection):
         self.connection = connection
@@ -146,7 +152,7 @@ class _Incoming:
     def newer(self) -> bool:
         while self.connection.poll():
             self.read.append(self.connection.recv())
-        return any(item is None or item[0] != 'keep' for item in self.read)
+        return any(item is None or item[0] not in ('keep', 'keeping') for item in self.read)
 
 
 def _kept(keeper, timer: PlanTimer, generation: int, results: Connection):
@@ -211,6 +217,13 @@ class _Keeper:
                 self.child.requests.send(item)
             except (OSError, ValueError):
                 return
+
+    def allow(self, working: bool) -> None:
+        """Let it work, or stop it where it is (SIGSTOP: no CPU at all until SIGCONT)."""
+        try:
+            os.kill(self.child.process.pid, signal.SIGCONT if working else signal.SIGSTOP)
+        except ProcessLookupError:
+            pass
 
     def close(self) -> None:
         """Its work is disposable: stopped at once."""
@@ -362,6 +375,15 @@ class PlanWorker:
         with self._send_lock:
             self._open += 1
             self._child.requests.send((request, plan))
+
+    def allow_keeping(self, working: bool) -> None:
+        """Let the keeper work (the arm holds, or has no goal), or stop it until then (a goal
+        is being planned or followed): it never takes CPU from a moving arm."""
+        try:
+            with self._send_lock:
+                self._child.requests.send(('keeping', bool(working)))
+        except (OSError, ValueError):
+            pass
 
     def keep(self, request: PlanRequest, plan: PathPlan) -> None:
         """Have ``plan`` kept from rest before it is asked for (a path between presets, kept
