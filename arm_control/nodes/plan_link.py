@@ -5,9 +5,9 @@ the point); its answer, turned back into joint waypoints, goes to the worker pro
 (``PlanWorker``) to be checked and timed; the TimedPlan comes back through ``on_timed``, in
 the worker's result thread. A broken or empty answer comes back at once, with the reason.
 
-While the arm has no goal, the paths between presets are asked for too, one at a time, and
-handed to the worker's keeper alone (``keep_presets``): the first goal from a preset to
-another then starts on its fine trajectory.
+Once the arm has had no goal for a while, the paths between presets are asked for too, one
+at a time, and handed to the worker's keeper alone (``keep_presets``): the first goal from a
+preset to another then starts on its fine trajectory.
 """
 
 from dataclasses import replace
@@ -32,8 +32,10 @@ from arm_control.planning.planner import waypoints_from_poses
 # repeated request from its last answer. Once it has answered, a slow planner is only slow.
 RESEND_AFTER_S = 0.3
 RESENDS = 2
-# A path between presets the planner did not answer is asked for again, this many calls in
-# all.
+# The paths between presets are asked for once the arm has had no goal for this long (s):
+# not while the first goals come, when the planner and the worker have the most to do; one
+# the planner did not answer is asked for again, this many calls in all.
+PRESETS_AFTER_IDLE_S = 1.0
 PRESET_CALLS = 3
 
 
@@ -55,6 +57,7 @@ class PlanLink:
         self.heard = False                   # ... and the planner has answered since
         self.presets_to_keep = self._preset_requests(arm)     # (request, calls so far)
         self.preset_call = None              # the open call for one of them, and when
+        self.idle_since_s = None             # no goal since (wall time)
         self.keeper_working = True
 
     def now_s(self) -> float:
@@ -90,8 +93,11 @@ class PlanLink:
             self.worker.allow_keeping(working)
 
     def keep_presets(self, idle: bool) -> None:
-        """When ``idle`` (no goal, nothing being planned) and the planner is there, ask for
-        the next path between presets; its answer goes to the keeper."""
+        """When ``idle`` (no goal, nothing being planned) for a while and the planner is
+        there, ask for the next path between presets; its answer goes to the keeper."""
+        now = time.monotonic()
+        idle = idle and self.found and self.worker.ready.is_set()     # since it could plan
+        self.idle_since_s = (self.idle_since_s or now) if idle else None
         if self.preset_call is not None:
             future, sent_s, request, calls = self.preset_call
             if time.monotonic() - sent_s <= 2.0 * self.planner_timeout_s:
@@ -102,8 +108,8 @@ class PlanLink:
             self.preset_call = None
             if calls < PRESET_CALLS:
                 self.presets_to_keep.append((request, calls))
-        if not (idle and self.presets_to_keep and self.found and self.worker.alive
-                and self.worker.ready.is_set() and not self.busy()):
+        if not (idle and now - self.idle_since_s >= PRESETS_AFTER_IDLE_S
+                and self.presets_to_keep and self.worker.alive and not self.busy()):
             return
         request, calls = self.presets_to_keep.pop(0)
         future = self.client.call_async(self._message(request))

@@ -20,10 +20,11 @@ Each path answered from rest then goes to the keeper, a second process at nice
 ``KEEPER_NICE``, which times it finely from rest; the worker keeps what comes back
 (``KeptTrajectories``), and the next goal from rest along the same path is answered with it
 at once, with nothing to refine. The node hands the keeper the planner's paths between
-presets too, while the arm has no goal (``PlanLink``), so a robot's preset-to-preset goals
-find theirs kept from the first. The keeper takes only the CPU the others leave, and only
-while the arm holds: the node stops it (SIGSTOP) while a goal is planned or followed, or the
-driver moves the arm. A goal never waits for it.
+presets too, once the arm has had no goal for a while (``PlanLink``), so a robot's
+preset-to-preset goals find theirs kept from the first. The keeper starts with the first
+path it is given, not with the worker, whose first goal may come at once. It takes only the
+CPU the others leave, and only while the arm holds: the node stops it (SIGSTOP) while a goal
+is planned or followed, or the driver moves the arm. A goal never waits for it.
 """
 
 from collections import deque
@@ -84,54 +85,99 @@ def _serve(requests: Connection, results: Connection) -> None:
     send back the TimedPlan (from rest: the quick one, then its refinement), then the
     request's id: done with it; ('keep', request, plan): a path between presets, for the
     keeper only; ('keeping', bool): whether the keeper may work now; new (arm, config) when
-    the settings change at run time. What the keeper
-    sends back is kept, and the count sent as ('kept', count)."""
-    timer, keeper = None, None
+    the settings change at run time. What the keeper sends back is kept, and the count sent
+    as ('kept', count)."""
+    timer = None
     clock = HandoverClock()
     incoming = _Incoming(requests)
-    generation = 0                  # the settings' version: a keeper's answer is for one
+    keeping = _Keeping()
     try:
         while True:
+            keeper = keeping.keeper
             if not incoming.waiting and keeper is not None \
                     and requests not in wait([requests, keeper.results]):
-                keeper = _kept(keeper, timer, generation, results)
+                done = keeping.take()
+                if done is not None:
+                    timer.kept.add(*done)
+                    results.send(('kept', len(timer.kept)))
                 continue
             item = incoming.next()
             if item is None:
                 return
             if isinstance(item[0], ArmConfig):
                 first = timer is None
-                timer, generation = PlanTimer(*item), generation + 1
+                timer = PlanTimer(*item)
+                keeping.retune(item)
                 results.send(('kept', 0))
                 if first:
                     results.send(None)                      # ready
-                    keeper = _Keeper.start()
                     # The moving-start solver's import (0.8 s) done meanwhile, not at the
                     # first goal that preempts another.
                     threading.Thread(target=toppra_solver, daemon=True).start()
                     _warm_up(timer, clock)
-                if keeper is not None:
-                    keeper.settings(generation, item)
-                continue
-            if item[0] == 'keeping':
-                if keeper is not None:
-                    keeper.allow(item[1])
-                continue
-            if item[0] == 'keep':
-                request, plan = item[1:]
-                if keeper is not None and timer.kept.find(request, plan, touch=False) is None:
-                    keeper.send((generation, request, plan, True))
-                continue
-            request, plan = item
-            if _answer(timer, clock, request, plan, results.send, incoming.newer) \
-                    and keeper is not None:
-                keeper.send((generation, request, plan, False))
-            results.send(request.request_id)
+            elif item[0] == 'keeping':
+                keeping.allow(item[1])
+            elif item[0] == 'keep':
+                if timer.kept.find(*item[1:], touch=False) is None:
+                    keeping.send(*item[1:], pinned=True)
+            else:
+                request, plan = item
+                if _answer(timer, clock, request, plan, results.send, incoming.newer):
+                    keeping.send(request, plan, pinned=False)
+                results.send(request.request_id)
     except (EOFError, OSError):     # the node is gone
         return
     finally:
-        if keeper is not None:
-            keeper.close()
+        keeping.close()
+
+
+class _Keeping:
+    """The keeper as the worker sees it: started with the first path it is given (not with the
+    worker, whose first goal may come at once), told each new setting (a ``generation``:
+    what it times with older ones is dropped), let work or stopped."""
+
+    def __init__(self):
+        self.keeper = None
+        self.gone = False                   # could not start, or ended: nothing more kept
+        self.generation, self.settings, self.working = 0, None, True
+
+    def retune(self, settings) -> None:
+        self.generation, self.settings = self.generation + 1, settings
+        if self.keeper is not None:
+            self.keeper.settings(self.generation, settings)
+
+    def allow(self, working: bool) -> None:
+        self.working = working
+        if self.keeper is not None:
+            self.keeper.allow(working)
+
+    def send(self, request: PlanRequest, plan, pinned: bool) -> None:
+        if self.keeper is None and not self.gone:
+            self.keeper = _Keeper.start()
+            self.gone = self.keeper is None
+            if self.keeper is not None:
+                self.keeper.settings(self.generation, self.settings)
+                self.keeper.allow(self.working)
+        if self.keeper is not None:
+            self.keeper.send((self.generation, request, plan, pinned))
+
+    def take(self):
+        """(request, plan, trajectory, pinned) the keeper timed with these settings, or None
+        (older settings; or it has ended)."""
+        try:
+            generation, *done = self.keeper.results.recv()
+        except (EOFError, OSError):
+            print('plan worker: the keeper process ended; fine trajectories are no longer kept',
+                  file=sys.stderr, flush=True)
+            self.close()
+            self.gone = True
+            return None
+        return done if generation == self.generation else None
+
+    def close(self) -> None:
+        if self.keeper is not None:
+            self.keeper.close()
+            self.keeper = None
 
 
 class _Incoming:
@@ -153,22 +199,6 @@ class _Incoming:
         while self.connection.poll():
             self.read.append(self.connection.recv())
         return any(item is None or item[0] not in ('keep', 'keeping') for item in self.read)
-
-
-def _kept(keeper, timer: PlanTimer, generation: int, results: Connection):
-    """Keep what the keeper sent (if timed with these settings); the keeper, or None once
-    it has gone."""
-    try:
-        done_generation, request, plan, trajectory, pinned = keeper.results.recv()
-    except (EOFError, OSError):
-        print('plan worker: the keeper process ended; fine trajectories are no longer kept',
-              file=sys.stderr, flush=True)
-        keeper.close()
-        return None
-    if done_generation == generation:
-        timer.kept.add(request, plan, trajectory, pinned)
-        results.send(('kept', len(timer.kept)))
-    return keeper
 
 
 class _Keeper:
