@@ -100,7 +100,7 @@ class PlanLink:
         self.idle_since_s = (self.idle_since_s or now) if idle else None
         if self.preset_call is not None:
             future, sent_s, request, calls = self.preset_call
-            if time.monotonic() - sent_s <= 2.0 * self.planner_timeout_s:
+            if now - sent_s <= 2.0 * self.planner_timeout_s:
                 return
             # Unanswered (a planner just found may not reach us yet, or gone meanwhile):
             # asked again later, at most PRESET_CALLS times in all.
@@ -113,7 +113,7 @@ class PlanLink:
             return
         request, calls = self.presets_to_keep.pop(0)
         future = self.client.call_async(self._message(request))
-        self.preset_call = (future, time.monotonic(), request, calls + 1)
+        self.preset_call = (future, now, request, calls + 1)
         future.add_done_callback(lambda done, r=request: self._preset_answered(r, done))
 
     def _preset_answered(self, request, future) -> None:

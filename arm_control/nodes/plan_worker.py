@@ -409,18 +409,18 @@ class PlanWorker:
     def allow_keeping(self, working: bool) -> None:
         """Let the keeper work (the arm holds, or has no goal), or stop it until then (a goal
         is being planned or followed): it never takes CPU from a moving arm."""
-        try:
-            with self._send_lock:
-                self._child.requests.send(('keeping', bool(working)))
-        except (OSError, ValueError):
-            pass
+        self._send_for_keeper(('keeping', bool(working)))
 
     def keep(self, request: PlanRequest, plan: PathPlan) -> None:
         """Have ``plan`` kept from rest before it is asked for (a path between presets, kept
-        for good); nothing when the worker is gone: keeping is optional."""
+        for good)."""
+        self._send_for_keeper(('keep', request, plan))
+
+    def _send_for_keeper(self, item) -> None:
+        """Nothing when the worker is gone: keeping is optional."""
         try:
             with self._send_lock:
-                self._child.requests.send(('keep', request, plan))
+                self._child.requests.send(item)
         except (OSError, ValueError):
             pass
 
