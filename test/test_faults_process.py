@@ -211,8 +211,8 @@ def test_estop_by_service(rig):
     assert np.max(np.abs(rig.true_q() - rested)) < 1.0 * DEG     # ... and held up there
     assert_never_forbidden(rig, stopped)
 
-    cut = time.monotonic()
     assert rig.call(Trigger, '/controller/estop').success
+    cut = time.monotonic()       # answered: from here on (and DDS's slack) nothing but 0 V
     rig.spin_for(0.5)
     after = [m for t, m in rig.voltages if t > cut + PROBE_SLACK_S]
     assert after and all(zero(m) for m in after)

@@ -172,6 +172,11 @@ class ArmController:
         kind = Kind.CONTROL_FAILED if cut_power else Kind.ESTOP
         return self._say(now_s, kind, 'error', f'E-STOP: {reason}; {action}')
 
+    @property
+    def unpowered(self) -> bool:
+        """Stopped at 0 V: e-stopped (and not holding), disabled or in error."""
+        return self.state in STOPPED and not self.estop_holding
+
     def reset(self, now_s: float) -> tuple[bool, str]:
         """Clear an e-stop or an error; a held arm keeps its hold, one at 0 V is taken back."""
         if not self.machine.can(T.RESET):
@@ -234,7 +239,7 @@ class ArmController:
             self.goals.take_requests()
             self.on_timed_plan(now_s, self.plan_timer.plan_and_time(pending, self.planner))
         self.events.flush(now_s)
-        if self.state in STOPPED and not self.estop_holding:
+        if self.unpowered:
             self.voltage, self.tracking_error_rad = np.zeros(2), np.zeros(2)
             return self.voltage.copy()
         self.voltage = self._control(now_s, dt_s)

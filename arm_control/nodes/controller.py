@@ -139,9 +139,13 @@ class ControllerNode(Node):
         return self.now_s() + self.lag_s()
 
     def command(self, call, *args):
-        """Call the core under the lock, then say what it said."""
+        """Call the core under the lock, then say what it said. A call that leaves the arm
+        unpowered (e-stop, disable) sends 0 V now, not at the next tick: under the same lock
+        as the tick's own command, so none computed before the call goes out after it."""
         with self.lock:
             result = call(self.core_now_s(), *args)
+            if self.core.unpowered:
+                self.voltage_pub.publish(Float64MultiArray(data=[0.0, 0.0]))
         self.publish_outputs()
         return result
 
@@ -286,8 +290,9 @@ class ControllerNode(Node):
             said = (self.core.events.waiting or self.core.goals.plans.waiting
                     or self.core.state != self.last_state
                     or self.core.goals.queue.version != self.last_queue_version)
-        if estimate is not None:     # before the first reading there is nothing to command
-            self.voltage_pub.publish(Float64MultiArray(data=[float(v) for v in voltage]))
+            if estimate is not None:     # before the first reading there is nothing to command
+                self.voltage_pub.publish(Float64MultiArray(data=[float(v) for v in voltage]))
+        if estimate is not None:
             self.command_delay.sent(time.perf_counter() - began)
             stamp = Time(nanoseconds=round(acts_s * 1e9)).to_msg()     # what they are for
             self.setpoint_pub.publish(messages.joint_state(stamp, setpoint[0], setpoint[1]))
