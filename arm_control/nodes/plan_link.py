@@ -24,12 +24,12 @@ from arm_control.nodes import messages
 from arm_control.nodes.plan_worker import PlanWorker
 from arm_control.planning.planner import waypoints_from_poses
 
-# Until the planner has answered us once since we found it, a call unanswered this long is
-# sent again, at most RESENDS times: a planner we have just found may not yet reach our reply
-# reader, and its answer is lost (DDS discovery is not symmetric in time; under load it
-# takes seconds). The earlier calls stay open and the first answer counts: a first plan on a
-# loaded machine can take longer than this (0.47 s was seen), and the planner answers a
-# repeated request from its last answer. Once it has answered, a slow planner is only slow.
+# A call unanswered this long is sent again, at most RESENDS times; the earlier calls stay
+# open and the first answer counts. An answer can be lost: a planner we have just found may
+# not yet reach our reply reader (DDS discovery is not symmetric in time; under load it takes
+# seconds), and a sample lost on a loaded machine waits for the writer's next heartbeat. The
+# planner answers a repeated request from its last answer, so a call sent again to a planner
+# that is only slow (a first plan on a loaded machine took 0.47 s) costs a message.
 RESEND_AFTER_S = 0.3
 RESENDS = 2
 # The paths between presets are asked for once the arm has had no goal for this long (s):
@@ -54,7 +54,6 @@ class PlanLink:
         self.calls = {}                      # unanswered call -> (sent at, request, sends)
         self.answered_s = {}                 # request id -> when the planner answered
         self.found = False                   # the client reaches the planner
-        self.heard = False                   # ... and the planner has answered since
         self.presets_to_keep = self._preset_requests(arm)     # (request, calls so far)
         self.preset_call = None              # the open call for one of them, and when
         self.idle_since_s = None             # no goal since (wall time)
@@ -69,11 +68,10 @@ class PlanLink:
         time: planning takes it, whatever the clock)."""
         now = time.monotonic()
         self.found = self.client.service_is_ready()
-        self.heard = self.heard and self.found
         for future, (sent_s, request, sends) in list(self.calls.items()):
             if now - sent_s > 2.0 * self.planner_timeout_s:
                 self._forget(future)
-            elif self.found and not self.heard and now - sent_s > RESEND_AFTER_S \
+            elif self.found and now - sent_s > RESEND_AFTER_S \
                     and sends == self._sends(request) and sends <= RESENDS:
                 self._call(request, sends + 1)
         return self.found and self.worker.ready.is_set()
@@ -120,7 +118,6 @@ class PlanLink:
         if self.preset_call is None or self.preset_call[0] is not future:
             return                                          # given up on
         self.preset_call = None
-        self.heard = self.found
         try:
             waypoints = waypoints_from_poses(self.kinematics,
                                              messages.poses_of(future.result().plan),
@@ -173,7 +170,6 @@ class PlanLink:
         for other in [f for f, call in self.calls.items()
                       if call[1].request_id == request.request_id]:
             self._forget(other)
-        self.heard = self.found
         self.answered_s[request.request_id] = self.now_s()
         try:
             poses = messages.poses_of(future.result().plan)
