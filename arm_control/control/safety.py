@@ -19,7 +19,7 @@ from typing import Optional
 import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
-from arm_control.control.motions import HoldTrajectory, Motion, StraightMove
+from arm_control.control.motions import HoldTrajectory, Motion, StraightMove, StraightStop
 from arm_control.control.trajectory import sure_acceleration_rad_s2, TrajectoryLimits
 from arm_control.model.world import ForbiddenSpace
 
@@ -82,6 +82,10 @@ class SafetyRules:
         self.over_limit_since_s = None
         again = lost.rejoined(now_s, q, qd, REJOIN_RAD, REJOIN_RAD_S) if lost else None
         if again is not None:
+            stop = StraightStop(q, qd, now_s, self.max_acceleration)
+            if self.forbidden.segment_is_free(q, stop.final_q):
+                return stop, ('moving near its plan: braking from where it is, in a straight '
+                              'line, while the goal is planned again from there')
             return again, 'still on its plan, which goes on from there'
         if commanded_q is not None:
             commanded_q = np.asarray(commanded_q, float)
