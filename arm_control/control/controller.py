@@ -266,8 +266,9 @@ class ArmController:
         if not fresh and self.estop_holding:
             self.estop(now_s, f'no joint states for {age_s:.3f} s while holding', cut_power=True)
         if fresh and self.state == S.NO_SENSORS:
-            what = self._resume(now_s, lost=self.setpoints.timeline.last)
-            held, self.held_when_lost = self.held_when_lost, None
+            held, self.held_when_lost = self.held_when_lost, None     # held: no motion lost
+            what = self._resume(now_s, lost=None if held is not None
+                                else self.setpoints.timeline.last)
             back_to_goal = held is not None and np.allclose(self.resume_motion.final_q, held)
             self.machine.fire(T.SENSORS_BACK_HELD if back_to_goal else T.SENSORS_BACK)
             if back_to_goal:

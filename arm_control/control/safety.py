@@ -5,12 +5,14 @@ E-stop at 0 V when control itself has failed: the tracking error stays above
 follow), or a joint reads past its hard stop by more than noise allows.
 
 Resuming after a period at 0 V (an e-stop, a disable, lost sensors), the arm has sagged. When
-the sensors alone stalled and the arm is still moving along the plan it was on (a paused
-simulator froze both), that plan goes on from where the arm is on it. Otherwise the arm
-goes back to where it was last commanded when that is near and the way there is free, so
-that bursts of cuts cannot ratchet it down; otherwise it holds where it is, lifted clear by
-the shortest straight move first if it sagged within ``world.clearance_rad`` of forbidden
-space. Either move is a ``StraightMove`` at what the motors surely give: no timing solve.
+the sensors alone stalled and the arm is still moving near the plan it was on (a paused
+simulator froze both), it brakes to rest from where it is, in a straight line, while its
+goal is planned again from there; where that line is not free, the plan goes on from where
+the arm is on it. Otherwise the arm goes back to where it was last commanded when that is
+near and the way there is free, so that bursts of cuts cannot ratchet it down; otherwise it
+holds where it is -- braking there first if it moves -- lifted clear by the shortest
+straight move first if it sagged within ``world.clearance_rad`` of forbidden space. Each
+move is at what the motors surely give: no timing solve.
 """
 
 import math
@@ -31,6 +33,8 @@ RETURN_REACH_RAD = 0.15
 # paused sim leaves the arm 2-4 deg and 1-1.2 rad/s off it: the sim catches up 0.1 s, then
 # applies the 0 V sent meanwhile until the controller's next command.)
 REJOIN_RAD, REJOIN_RAD_S = math.radians(5.0), 1.5
+# Moving, not at rest with noise: faster than this on either joint (rad/s).
+MOVING_RAD_S = 0.3
 # A hold is lifted clear of forbidden space only from this near it: deeper in, the way out
 # is the planner's.
 LIFT_REACH_RAD = 0.35
@@ -80,10 +84,11 @@ class SafetyRules:
         ``lost``: the motion the sensors were lost on, when that is why control stopped."""
         q, qd = np.asarray(state[:2], float), np.asarray(state[2:], float)
         self.over_limit_since_s = None
-        again = lost.rejoined(now_s, q, qd, REJOIN_RAD, REJOIN_RAD_S) if lost else None
+        again = lost.rejoined(now_s, q, qd, REJOIN_RAD, REJOIN_RAD_S, MOVING_RAD_S) \
+            if lost else None
         if again is not None:
-            stop = StraightStop(q, qd, now_s, self.max_acceleration)
-            if self.forbidden.segment_is_free(q, stop.final_q):
+            stop = self._stop(now_s, q, qd)
+            if stop is not None:
                 return stop, ('moving near its plan: braking from where it is, in a straight '
                               'line, while the goal is planned again from there')
             return again, 'still on its plan, which goes on from there'
@@ -96,6 +101,9 @@ class SafetyRules:
                         f'back to where it was held, ({step[0]:+.1f}, {step[1]:+.1f}) deg away')
         margin = self.arm.world.clearance_rad
         if margin <= 0.0 or self.forbidden.clear_by(q, margin):
+            stop = self._stop(now_s, q, qd)
+            if stop is not None:
+                return stop, 'moving: braking from where it is, in a straight line, to hold there'
             return Motion(HoldTrajectory(q), now_s), 'holding where it is'
         target = self.forbidden.nearest_clear(q, margin, LIFT_REACH_RAD)
         if target is None:
@@ -107,6 +115,15 @@ class SafetyRules:
         return (self._move(now_s, q, target),
                 f'within {math.degrees(margin):.1f} deg of forbidden space: lifting it clear '
                 f'by ({step[0]:+.1f}, {step[1]:+.1f}) deg, holding there')
+
+    def _stop(self, now_s, q, qd) -> Optional[Motion]:
+        """Brake to rest from (q, q̇) at what the motors surely give, when the arm moves and
+        the straight line it stops along is free: holding a point it is flying past, or a plan
+        it is behind at the motors' limits, would leave it beyond what the feedback catches."""
+        if np.max(np.abs(qd)) <= MOVING_RAD_S:
+            return None
+        stop = StraightStop(q, qd, now_s, self.max_acceleration)
+        return stop if self.forbidden.segment_is_free(q, stop.final_q) else None
 
     def _move(self, now_s, q0, q1) -> Motion:
         return StraightMove(q0, q1, now_s, self.max_acceleration, self.max_velocity)

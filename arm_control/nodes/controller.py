@@ -139,12 +139,13 @@ class ControllerNode(Node):
         return self.now_s() + self.lag_s()
 
     def command(self, call, *args):
-        """Call the core under the lock, then say what it said. A call that leaves the arm
-        unpowered (e-stop, disable) sends 0 V now, not at the next tick: under the same lock
-        as the tick's own command, so none computed before the call goes out after it."""
+        """Call the core under the lock, then say what it said. A call that cuts the power
+        (e-stop, disable) sends 0 V now, not at the next tick: under the same lock as the
+        tick's own command, so none computed before the call goes out after it."""
         with self.lock:
+            powered = not self.core.unpowered
             result = call(self.core_now_s(), *args)
-            if self.core.unpowered:
+            if powered and self.core.unpowered:
                 self.voltage_pub.publish(Float64MultiArray(data=[0.0, 0.0]))
         self.publish_outputs()
         return result
