@@ -26,18 +26,18 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent / 'test'), str(HERE)]
 
 from arm_rig import ArmRig  # noqa: E402
+from bench_ros import lowest_mm  # noqa: E402
 import busy  # noqa: E402
 import numpy as np  # noqa: E402
 from ros_harness import Probe, ros_domain  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from arm_control import config  # noqa: E402
-from arm_control.model.world import ForbiddenSpace  # noqa: E402
 
 LOW_BACK, LOW_FRONT = (-1.5, 0.15), (1.6, 0.1)
 
 
-def one_run(rig, forbidden, stall_s: float, into_s: float) -> tuple:
+def one_run(rig, arm, stall_s: float, into_s: float) -> tuple:
     """(outcome, lowest point mm, what the controller said when the readings came back)."""
     if rig.state == 'estopped':
         rig.call(Trigger, '/controller/reset')
@@ -56,10 +56,10 @@ def one_run(rig, forbidden, stall_s: float, into_s: float) -> tuple:
     rig.spin_until(lambda: rig.said('goal_reached', began) or rig.state == 'estopped', 10.0)
     rig.spin_for(0.5)
     q = np.array([m.position for m in rig.truth.messages(began)])
-    lowest_mm = 1000.0 * float(np.min(forbidden.lowest_point_m(q)))
+    lowest = lowest_mm(arm, q)
     back = [sentence for _, _, sentence in rig.said('sensors_back', began)]
     outcome = 'reached' if rig.said('goal_reached', began) else rig.state
-    return outcome, lowest_mm, back[-1] if back else '(no stall seen)'
+    return outcome, lowest, back[-1] if back else '(no stall seen)'
 
 
 def main() -> None:
@@ -70,7 +70,6 @@ def main() -> None:
     parser.add_argument('--seed', type=int, default=1, help='of the moments of the stalls')
     args = parser.parse_args()
     arm, _ = config.load('controller')
-    forbidden = ForbiddenSpace(arm)
     moments = random.Random(args.seed)
     log_dir = tempfile.mkdtemp(prefix='arm_sensor_stalls_')
     print(f'{args.stall:g} s stalls of the sim on low back -> low front'
@@ -88,7 +87,7 @@ def main() -> None:
                 rig.ready()
                 for run in range(1, args.runs + 1):
                     into_s = moments.uniform(0.2, 1.2)
-                    outcome, lowest, said = one_run(rig, forbidden, args.stall, into_s)
+                    outcome, lowest, said = one_run(rig, arm, args.stall, into_s)
                     failed += outcome != 'reached' or not lowest >= 0.0
                     said = said.split(': ', 1)[-1]
                     print(f'| {run} | {into_s:.2f} | {outcome} | {lowest:.0f} | {said} |',
