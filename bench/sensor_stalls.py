@@ -56,7 +56,7 @@ def one_run(rig, arm, stall_s: float, into_s: float) -> tuple:
     rig.spin_until(lambda: rig.said('goal_reached', began) or rig.state == 'estopped', 10.0)
     rig.spin_for(0.5)
     q = np.array([m.position for m in rig.truth.messages(began)])
-    lowest = lowest_mm(arm, q)
+    lowest = lowest_mm(arm, q) if len(q) else float('nan')      # nan: counted as failed
     back = [sentence for _, _, sentence in rig.said('sensors_back', began)]
     outcome = 'reached' if rig.said('goal_reached', began) else rig.state
     return outcome, lowest, back[-1] if back else '(no stall seen)'

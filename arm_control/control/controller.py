@@ -11,8 +11,8 @@ Each period the node (or a test, or a benchmark) calls ``step(now_s, reading)``;
    tracks that model's state on the estimate;
 4. enforces the safety rules (``safety.py``): control that has failed stops at 0 V; an
    e-stop by service brakes to rest along the path and holds there (``estop_holds_arm``:
-   with no brake, 0 V drops a 45 kg arm); taking control back after 0 V returns the arm to
-   where it was held, or lifts it clear of forbidden space.
+   with no brake, 0 V drops a 45 kg arm); taking control back after 0 V brakes an arm that
+   moves, returns it to where it was held, or lifts it clear of forbidden space.
 
 Planning is asynchronous: starting a goal emits a ``PlanRequest`` (``take_plan_requests``)
 and the answer comes back as a ``TimedPlan`` through ``on_timed_plan`` -- timed elsewhere
@@ -34,7 +34,7 @@ from arm_control.control.goal_runner import GoalRunner
 from arm_control.control.motions import Setpoints
 from arm_control.control.pid import ArmPid
 from arm_control.control.plans import PlanRequest, PlanTimer, TimedPlan
-from arm_control.control.safety import SafetyRules, sure_limits
+from arm_control.control.safety import LEAVES_PER_GOAL, SafetyRules, sure_limits
 from arm_control.control.sensing import Sensing
 from arm_control.control.state_machine import (ArmState as S, COMMANDING, StateMachine,
                                                STOPPED, Trigger as T)
@@ -69,6 +69,8 @@ class ArmController:
         self.commanded_q: Optional[np.ndarray] = None    # the setpoint last commanded
         self.resume_motion = None                         # the last motion back after 0 V
         self.held_when_lost: Optional[np.ndarray] = None  # the goal held as sensors went
+        self.lost_motion = None                   # ... or the motion under way then
+        self.left_goal, self.left_times = None, 0         # the goal whose motion it left
         self.estop_holding = False                        # e-stopped, holding (not at 0 V)
         self.voltage = self.feedforward_v = self.feedback_v = np.zeros(2)
         self.saturated = (0, 0)
@@ -247,7 +249,33 @@ class ArmController:
         if failure is not None:
             self.estop(now_s, failure, cut_power=True)
             self.voltage = np.zeros(2)
+        elif self._leave_motion(now_s):
+            self.voltage = self._control(now_s, dt_s)
         return self.voltage.copy()
+
+    def _leave_motion(self, now_s: float) -> bool:
+        """Far off the motion it follows to a goal (its commands held up on the way, as DDS
+        does for ~0.3 s when a node joins on a loaded machine; a push): a plan at the motors'
+        limits leaves nothing to catch up with, so it brakes from where it is while the goal
+        is planned again from there -- at most ``LEAVES_PER_GOAL`` times a goal, and past
+        that the tracking-error rule decides (an arm that cannot follow is still stopped)."""
+        goal = self.goals.queue.current
+        if self.state not in (S.PLANNING, S.TRACKING) or goal is None \
+                or not self.safety.far_off(self.tracking_error_rad):
+            return False
+        if goal is not self.left_goal:
+            self.left_goal, self.left_times = goal, 0
+        if self.left_times >= LEAVES_PER_GOAL:
+            return False
+        self.left_times += 1
+        error = np.degrees(self.tracking_error_rad)
+        lost = self.setpoints.timeline.last
+        self.goals.interrupt()
+        self.machine.fire(T.MOVED)
+        self._say(now_s, Kind.OFF_PLAN, 'warning',
+                  f'({error[0]:+.1f}, {error[1]:+.1f}) deg off its motion to {goal.label}: '
+                  f'{self._resume(now_s, lost=lost)}')
+        return True
 
     def _supervise(self, now_s: float) -> None:
         """Sensors, joint limits, a jump of the sensors, then the goals."""
@@ -257,6 +285,8 @@ class ArmController:
         fresh = age_s + self.period_s <= self.config.joint_state_timeout_s
         if not fresh and self.machine.can(T.SENSORS_LOST):
             self.held_when_lost = self.commanded_q if self.state == S.HOLDING else None
+            timeline = self.setpoints.timeline
+            self.lost_motion = timeline.last if timeline.moving_at(now_s) else None
             self.goals.interrupt()                  # resumed when the sensors return
             self.machine.fire(T.SENSORS_LOST)
             self.goals.last_error = (f'no joint states for {age_s:.3f} s (limit '
@@ -266,9 +296,9 @@ class ArmController:
         if not fresh and self.estop_holding:
             self.estop(now_s, f'no joint states for {age_s:.3f} s while holding', cut_power=True)
         if fresh and self.state == S.NO_SENSORS:
-            held, self.held_when_lost = self.held_when_lost, None     # held: no motion lost
-            what = self._resume(now_s, lost=None if held is not None
-                                else self.setpoints.timeline.last)
+            held, self.held_when_lost = self.held_when_lost, None
+            lost, self.lost_motion = self.lost_motion, None
+            what = self._resume(now_s, lost=lost)
             back_to_goal = held is not None and np.allclose(self.resume_motion.final_q, held)
             self.machine.fire(T.SENSORS_BACK_HELD if back_to_goal else T.SENSORS_BACK)
             if back_to_goal:

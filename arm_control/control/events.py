@@ -33,6 +33,7 @@ class EventKind(str, Enum):
     SENSORS_LOST = 'sensors_lost'
     SENSORS_BACK = 'sensors_back'
     ARM_MOVED = 'arm_moved'                    # the sensors jumped: held where it now is
+    OFF_PLAN = 'off_plan'                      # far off its motion: braked, planned again
     LIFTING_CLEAR = 'lifting_clear'            # a hold begins by lifting out of the margin
     NOT_CLEAR = 'not_clear'                    # ... and no short move could
     DRIVER = 'driver'

@@ -17,7 +17,7 @@ import numpy as np
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.events import EventKind as Kind, EventLog, quote
 from arm_control.control.goals import Goal, GoalQueue, GoalValidator
-from arm_control.control.motions import Motion, Setpoints
+from arm_control.control.motions import Motion, Setpoints, StraightStop
 from arm_control.control.plans import PlanHandoff, PlanRequest, TimedPlan
 from arm_control.control.state_machine import ArmState as S, StateMachine, Trigger as T
 
@@ -146,7 +146,12 @@ class GoalRunner:
         last = self.setpoints.timeline.last
         verdict, value = self.plans.answer(now_s, timed, -math.inf if last is None
                                            else last.end_s)
-        if verdict == 'fail':
+        if verdict == 'fail' and timed.request.start_time_s is not None \
+                and isinstance(last, StraightStop) and not last.finished(now_s):
+            # Braking from where it was (off its plan, or back from a stall): none from the
+            # moving arm, so one from where it comes to rest.
+            self.ask(now_s, timed.request.goal, rest_q, last.end_s - now_s + 1e-6)
+        elif verdict == 'fail':
             self.fail(now_s, value)
         elif verdict == 'retry':
             self.ask(now_s, timed.request.goal, rest_q, value)

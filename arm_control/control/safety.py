@@ -5,14 +5,14 @@ E-stop at 0 V when control itself has failed: the tracking error stays above
 follow), or a joint reads past its hard stop by more than noise allows.
 
 Resuming after a period at 0 V (an e-stop, a disable, lost sensors), the arm has sagged. When
-the sensors alone stalled and the arm is still moving near the plan it was on (a paused
-simulator froze both), it brakes to rest from where it is, in a straight line, while its
-goal is planned again from there; where that line is not free, the plan goes on from where
-the arm is on it. Otherwise the arm goes back to where it was last commanded when that is
-near and the way there is free, so that bursts of cuts cannot ratchet it down; otherwise it
-holds where it is -- braking there first if it moves -- lifted clear by the shortest
-straight move first if it sagged within ``world.clearance_rad`` of forbidden space. Each
-move is at what the motors surely give: no timing solve.
+the sensors alone stalled mid-motion and the arm still moves (a paused simulator froze
+both), it brakes to rest from where it is, in a straight line, while its goal is planned
+again from there; where that line is not free and the arm is near its plan, the plan goes
+on from where the arm is on it. Otherwise the arm goes back to where it was last commanded
+when that is near and the way there is free, so that bursts of cuts cannot ratchet it down;
+otherwise it holds where it is -- braked there first if it moves -- lifted clear by the
+shortest straight move first if it sagged within ``world.clearance_rad`` of forbidden
+space. Each move is within what the motors surely give: no timing solve.
 """
 
 import math
@@ -35,6 +35,13 @@ RETURN_REACH_RAD = 0.15
 REJOIN_RAD, REJOIN_RAD_S = math.radians(5.0), 1.5
 # Moving, not at rest with noise: faster than this on either joint (rad/s).
 MOVING_RAD_S = 0.3
+# Off the motion to a goal by this share of ``tracking_error_limit_rad``, the arm leaves it:
+# braked from where it is, the goal planned again; at most LEAVES_PER_GOAL times a goal.
+OFF_PLAN_SHARE = 0.5
+LEAVES_PER_GOAL = 3
+# A stop from speed takes this many times what the sure accelerations need (as braking
+# along a path does: ``StoppingMotion``).
+STOP_MARGIN = 1.5
 # A hold is lifted clear of forbidden space only from this near it: deeper in, the way out
 # is the planner's.
 LIFT_REACH_RAD = 0.35
@@ -78,20 +85,25 @@ class SafetyRules:
                 f'{math.degrees(self.config.tracking_error_limit_rad):.1f} deg for '
                 f'{self.config.tracking_error_time_s:g} s')
 
+    def far_off(self, tracking_error_rad) -> bool:
+        """Off the motion by more than ``OFF_PLAN_SHARE`` of the tracking-error limit."""
+        return float(np.max(np.abs(tracking_error_rad))) > \
+            OFF_PLAN_SHARE * self.config.tracking_error_limit_rad
+
     def resume(self, now_s: float, state, commanded_q, lost=None) -> tuple[Motion, str]:
         """The motion that takes control back at ``state`` (the estimate [q, q̇]), last
         commanded at ``commanded_q`` (None if never), and a sentence saying what it does;
         ``lost``: the motion the sensors were lost on, when that is why control stopped."""
         q, qd = np.asarray(state[:2], float), np.asarray(state[2:], float)
         self.over_limit_since_s = None
-        again = lost.rejoined(now_s, q, qd, REJOIN_RAD, REJOIN_RAD_S, MOVING_RAD_S) \
-            if lost else None
-        if again is not None:
+        if lost is not None:                # a motion under way: its setpoint is no hold
             stop = self._stop(now_s, q, qd)
             if stop is not None:
-                return stop, ('moving near its plan: braking from where it is, in a straight '
-                              'line, while the goal is planned again from there')
-            return again, 'still on its plan, which goes on from there'
+                return stop, ('moving: braking from where it is, in a straight line, while '
+                              'the goal is planned again from there')
+            again = lost.rejoined(now_s, q, qd, REJOIN_RAD, REJOIN_RAD_S, MOVING_RAD_S)
+            if again is not None:
+                return again, 'still on its plan, which goes on from there'
         if commanded_q is not None:
             commanded_q = np.asarray(commanded_q, float)
             sag = float(np.max(np.abs(commanded_q - q)))
@@ -117,12 +129,14 @@ class SafetyRules:
                 f'by ({step[0]:+.1f}, {step[1]:+.1f}) deg, holding there')
 
     def _stop(self, now_s, q, qd) -> Optional[Motion]:
-        """Brake to rest from (q, q̇) at what the motors surely give, when the arm moves and
-        the straight line it stops along is free: holding a point it is flying past, or a plan
-        it is behind at the motors' limits, would leave it beyond what the feedback catches."""
+        """Brake to rest from (q, q̇) within 1/``STOP_MARGIN`` of what the motors surely
+        give from rest (at speed the arm's own dynamics take some), when the arm moves and
+        the straight line it stops along is free: holding a point it is flying past, or a
+        plan it is behind at the motors' limits, would leave it beyond what the feedback
+        catches."""
         if np.max(np.abs(qd)) <= MOVING_RAD_S:
             return None
-        stop = StraightStop(q, qd, now_s, self.max_acceleration)
+        stop = StraightStop(q, qd, now_s, self.max_acceleration / STOP_MARGIN)
         return stop if self.forbidden.segment_is_free(q, stop.final_q) else None
 
     def _move(self, now_s, q0, q1) -> Motion:

@@ -12,7 +12,9 @@ every period, ``arm_state`` (latched), ``~/setpoint``, ``~/estimate``, ``~/goal_
 Three threads of work: the control loop (``ControlLoop``) steps the core and commands the
 motors; the executor takes messages and services (at ``EXECUTOR_PRIORITY``, below the loop);
 a worker process times plans, and its keeper keeps fine trajectories (``PlanLink``). The
-core is shared under a lock held only for quick calls. 0 V on exit.
+core is shared under a lock held only for quick calls and the publishing of a command
+(a write that DDS blocks holds Python's own lock too: the process waits either way). 0 V on
+exit.
 """
 
 import math
@@ -141,11 +143,12 @@ class ControllerNode(Node):
     def command(self, call, *args):
         """Call the core under the lock, then say what it said. A call that cuts the power
         (e-stop, disable) sends 0 V now, not at the next tick: under the same lock as the
-        tick's own command, so none computed before the call goes out after it."""
+        tick's own command, so none computed before the call goes out after it. (Not in
+        simulated time, where the sim takes one command per step: the next tick's.)"""
         with self.lock:
             powered = not self.core.unpowered
             result = call(self.core_now_s(), *args)
-            if powered and self.core.unpowered:
+            if powered and self.core.unpowered and not self.loop.simulated():
                 self.voltage_pub.publish(Float64MultiArray(data=[0.0, 0.0]))
         self.publish_outputs()
         return result

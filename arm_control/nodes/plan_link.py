@@ -29,7 +29,8 @@ from arm_control.planning.planner import waypoints_from_poses
 # not yet reach our reply reader (DDS discovery is not symmetric in time; under load it takes
 # seconds), and a sample lost on a loaded machine waits for the writer's next heartbeat. The
 # planner answers a repeated request from its last answer, so a call sent again to a planner
-# that is only slow (a first plan on a loaded machine took 0.47 s) costs a message.
+# that is only slow (a first plan on a loaded machine took 0.47 s) costs a message (calls for
+# older requests are forgotten when a newer one goes out, so they do not come in between).
 RESEND_AFTER_S = 0.3
 RESENDS = 2
 # The paths between presets are asked for once the arm has had no goal for this long (s):
@@ -81,6 +82,12 @@ class PlanLink:
         return bool(self.calls) or self.worker.busy
 
     def send(self, requests) -> None:
+        """Call for ``requests``; the open calls for older ones are forgotten (the core takes
+        the answer to its newest only), so none of them is sent again."""
+        newest = {request.request_id for request in requests}
+        for future, (_, request, _) in list(self.calls.items()):
+            if request.request_id not in newest:
+                self._forget(future)
         for request in requests:
             self._call(request, 1)
 
