@@ -70,7 +70,7 @@ class ArmController:
         self.resume_motion = None                         # the last motion back after 0 V
         self.held_when_lost: Optional[np.ndarray] = None  # the goal held as sensors went
         self.lost_motion = None                   # ... or the motion under way then
-        self.left_goal, self.left_times = None, 0         # the goal whose motion it left
+        self.left_times, self.reached_when_left = 0, 0    # motions left since a goal reached
         self.estop_holding = False                        # e-stopped, holding (not at 0 V)
         self.voltage = self.feedforward_v = self.feedback_v = np.zeros(2)
         self.saturated = (0, 0)
@@ -257,14 +257,16 @@ class ArmController:
         """Far off the motion it follows to a goal (its commands held up on the way, as DDS
         does for ~0.3 s when a node joins on a loaded machine; a push): a plan at the motors'
         limits leaves nothing to catch up with, so it brakes from where it is while the goal
-        is planned again from there -- at most ``LEAVES_PER_GOAL`` times a goal, and past
-        that the tracking-error rule decides (an arm that cannot follow is still stopped)."""
+        is planned again from there -- at most ``LEAVES_PER_GOAL`` times until a goal is
+        reached (not per goal: new goals must not keep an arm that cannot follow from the
+        tracking-error rule), and past that the rule decides."""
         goal = self.goals.queue.current
         if self.state not in (S.PLANNING, S.TRACKING) or goal is None \
                 or not self.safety.far_off(self.tracking_error_rad):
             return False
-        if goal is not self.left_goal:
-            self.left_goal, self.left_times = goal, 0
+        reached = self.goals.counts['reached']
+        if reached != self.reached_when_left:
+            self.left_times, self.reached_when_left = 0, reached
         if self.left_times >= LEAVES_PER_GOAL:
             return False
         self.left_times += 1

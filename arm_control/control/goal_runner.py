@@ -148,8 +148,8 @@ class GoalRunner:
                                            else last.end_s)
         if verdict == 'fail' and timed.request.start_time_s is not None \
                 and isinstance(last, StraightStop) and not last.finished(now_s):
-            # Braking from where it was (off its plan, or back from a stall): none from the
-            # moving arm, so one from where it comes to rest.
+            # Braking to rest (off its plan, back from a stall, out of driver mode): none
+            # from the moving arm, so one from where it comes to rest.
             self.ask(now_s, timed.request.goal, rest_q, last.end_s - now_s + 1e-6)
         elif verdict == 'fail':
             self.fail(now_s, value)
