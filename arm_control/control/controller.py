@@ -34,7 +34,7 @@ from arm_control.control.goal_runner import GoalRunner
 from arm_control.control.motions import Setpoints
 from arm_control.control.pid import ArmPid
 from arm_control.control.plans import PlanRequest, PlanTimer, TimedPlan
-from arm_control.control.safety import LEAVES_PER_GOAL, SafetyRules, sure_limits
+from arm_control.control.safety import LEAVES_UNTIL_REACHED, SafetyRules, sure_limits
 from arm_control.control.sensing import Sensing
 from arm_control.control.state_machine import (ArmState as S, COMMANDING, StateMachine,
                                                STOPPED, Trigger as T)
@@ -257,8 +257,8 @@ class ArmController:
         """Far off the motion it follows to a goal (its commands held up on the way, as DDS
         does for ~0.3 s when a node joins on a loaded machine; a push): a plan at the motors'
         limits leaves nothing to catch up with, so it brakes from where it is while the goal
-        is planned again from there -- at most ``LEAVES_PER_GOAL`` times until a goal is
-        reached (not per goal: new goals must not keep an arm that cannot follow from the
+        is planned again from there -- at most ``LEAVES_UNTIL_REACHED`` times before a goal
+        is reached (not per goal: new goals must not keep an arm that cannot follow from the
         tracking-error rule), and past that the rule decides."""
         goal = self.goals.queue.current
         if self.state not in (S.PLANNING, S.TRACKING) or goal is None \
@@ -267,7 +267,7 @@ class ArmController:
         reached = self.goals.counts['reached']
         if reached != self.reached_when_left:
             self.left_times, self.reached_when_left = 0, reached
-        if self.left_times >= LEAVES_PER_GOAL:
+        if self.left_times >= LEAVES_UNTIL_REACHED:
             return False
         self.left_times += 1
         error = np.degrees(self.tracking_error_rad)

@@ -36,10 +36,10 @@ REJOIN_RAD, REJOIN_RAD_S = math.radians(5.0), 1.5
 # Moving, not at rest with noise: faster than this on either joint (rad/s).
 MOVING_RAD_S = 0.3
 # Off the motion to a goal by this share of ``tracking_error_limit_rad``, the arm leaves it:
-# braked from where it is, the goal planned again; at most LEAVES_PER_GOAL times until a
-# goal is reached.
+# braked from where it is, the goal planned again; at most LEAVES_UNTIL_REACHED times before
+# a goal is reached.
 OFF_PLAN_SHARE = 0.5
-LEAVES_PER_GOAL = 3
+LEAVES_UNTIL_REACHED = 3
 # A stop from speed takes this many times what the sure accelerations need (as braking
 # along a path does: ``StoppingMotion``).
 STOP_MARGIN = 1.5
