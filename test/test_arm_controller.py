@@ -104,8 +104,9 @@ def test_the_queue_is_bounded_and_overflow_is_rejected(arm, controller_config, p
 
 def test_a_flood_of_goals_is_answered_and_counted_and_memory_stays_bounded(
         arm, controller_config, planner):
-    """5,000 goals at once: the queue takes its size, the rest are rejected -- said one by
-    one up to the burst, then counted in one event a second. None goes unanswered."""
+    """5,000 goals at once at an idle arm: the first starts, the queue takes its size, the
+    rest are rejected -- said one by one up to the burst, then counted in one event a
+    second. None goes unanswered."""
     rig = Rig(arm, controller_config, planner)
     rig.step()
     rig.core.events.take()
@@ -116,7 +117,7 @@ def test_a_flood_of_goals_is_answered_and_counted_and_memory_stays_bounded(
     queued = sum(e.kind == Kind.GOAL_QUEUED for e in events)
     said = sum(e.kind == Kind.GOAL_REJECTED for e in events)
     counted = sum(int(e.message.split()[0]) for e in events if e.kind == Kind.GOALS_REJECTED)
-    assert queued == controller_config.goal_queue_size
+    assert queued == 1 + controller_config.goal_queue_size
     assert queued + said + counted == 5000
     assert said <= 25 and len(events) <= 200
     assert len(rig.core.events.history) <= 200
@@ -205,6 +206,21 @@ def test_asynchronous_planning_round_trip(arm, controller_config, planner):
     rig.core.on_timed_plan(rig.now, timed)
     assert rig.core.state == ArmState.TRACKING
     assert rig.run(5.0, rig.in_state(ArmState.HOLDING))
+
+
+def test_a_goal_for_an_idle_arm_is_asked_for_at_once_and_the_next_waits_its_turn(
+        arm, controller_config):
+    """Queued at an idle arm, a goal's plan is asked for when it comes, not at the next
+    period; a goal queued behind it waits until the arm has reached the first."""
+    rig = Rig(arm, controller_config, planner=None)
+    rig.step()
+    rig.core.submit_goal(rig.now, 1.1, 0.9)
+    assert rig.core.state == ArmState.PLANNING
+    (request,) = rig.core.take_plan_requests()
+    assert request.goal.xy == pytest.approx((1.1, 0.9))
+    rig.core.submit_goal(rig.now, 0.9, 1.5)
+    assert rig.core.take_plan_requests() == []
+    assert [g.xy for g in rig.core.pending_goals()][-1] == pytest.approx((0.9, 1.5))
 
 
 def test_no_plan_in_time_rejects_the_goal_without_moving(arm, controller_config):

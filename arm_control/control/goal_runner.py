@@ -78,8 +78,11 @@ class GoalRunner:
                                       'queued goals are kept', 'the queue full')
         self.queue.append(goal)
         self.counts['queued'] += 1
-        return self._accept(now_s, Kind.GOAL_QUEUED, f'goal {goal.label} queued{note} '
+        said = self._accept(now_s, Kind.GOAL_QUEUED, f'goal {goal.label} queued{note} '
                                                      f'({len(self.queue.waiting)} waiting)')
+        if self._ready_for_next(now_s):     # planned now, not half a period later on average
+            self.start(now_s, self.queue.start_next(), rest_q, from_queue=True)
+        return said
 
     def submit_preset(self, now_s: float, name: str, preempt: bool, rest_q) -> tuple[bool, str]:
         """A named goal from the parameter file, as a driver's button."""
@@ -229,10 +232,14 @@ class GoalRunner:
         state = self.machine.state
         if state == S.TRACKING and self._arrived(now_s, estimate):
             self._arrive(now_s, estimate)
-        idle = self.machine.state in (S.WAITING, S.ERROR) or (
-            self.machine.state == S.HOLDING and now_s >= self.arrived_s + self.config.dwell_s)
-        if idle and self.queue.waiting:
+        if self._ready_for_next(now_s):
             self.start(now_s, self.queue.start_next(), estimate[:2], from_queue=True)
+
+    def _ready_for_next(self, now_s: float) -> bool:
+        """A goal waits and the arm is idle: waiting, after an error, or held past the dwell."""
+        state = self.machine.state
+        return bool(self.queue.waiting) and (state in (S.WAITING, S.ERROR) or (
+            state == S.HOLDING and now_s >= self.arrived_s + self.config.dwell_s))
 
     def _arrived(self, now_s: float, estimate) -> bool:
         """Done moving, both joints within tolerance of the goal and nearly still."""
