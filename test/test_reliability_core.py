@@ -16,6 +16,7 @@ import numpy as np
 from arm_control import config
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
+from arm_control.control.goals import GoalValidator
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.model.plant import ArmPlant
@@ -191,4 +192,27 @@ def test_commands_lost_mid_move_then_the_arm_is_brought_back_not_dropped(arm, co
     assert core.state != ArmState.ESTOPPED, said
     assert any(e.startswith('off_plan') for e in said), said
     assert any(e.startswith('goal_reached: reached (-0.600, 1.500)') for e in said), said
+    assert min(lowest) >= 0.0
+
+
+def test_a_move_whose_first_commands_are_held_up_waits_for_the_arm_and_keeps_off_the_floor(
+        arm, controller_config):
+    """The motors keep the hold's command over the first 40 ms of "low front → far low back"
+    (up and over, to full reach 0.1 m above the floor): the shoulder, at its motors' limit,
+    cannot make that up. Driven to catch up, the arm came to the plan's braking faster than
+    the plan and went 0.39 m into the floor; the plan waits for it instead."""
+    core = ArmController(arm, controller_config, Planner(arm, config.load('planner')[1]))
+    plant = ArmPlant(arm, GoalValidator(arm).free_configurations(1.6, 0.1)[0], seed=0)
+    period_s = 1.0 / controller_config.loop_rate_hz
+    run(core, plant, 0.5, period_s)
+    core.submit_goal(plant.time_s, -1.7, 0.1)
+    lowest = []
+    for step in range(round(3.0 / period_s)):
+        voltage = core.step(plant.time_s, plant.read())
+        if step >= round(0.04 / period_s):
+            plant.set_voltage(voltage)
+        plant.advance(period_s)
+        lowest.append(ForbiddenSpace(arm).lowest_point_m(np.array(plant.state[:2])[None])[0])
+    said = [str(e) for e in core.events.take()]
+    assert any(e.startswith('goal_reached: reached (-1.700, 0.100)') for e in said), said
     assert min(lowest) >= 0.0

@@ -8,7 +8,8 @@ Each period the node (or a test, or a benchmark) calls ``step(now_s, reading)``;
    ``state_machine.py`` holds every allowed transition;
 3. commands V = feedforward + PID, clamped to the battery's volts: the feedforward is the held
    voltage that keeps a model of the arm on the trajectory (``PeriodFeedforward``), the PID
-   tracks that model's state on the estimate;
+   tracks that model's state on the estimate; a planned motion the arm is late on waits for
+   it (``_wait_for_a_late_arm``);
 4. enforces the safety rules (``safety.py``): control that has failed stops at 0 V; an
    e-stop by service brakes to rest along the path and holds there (``estop_holds_arm``:
    with no brake, 0 V drops a 45 kg arm); taking control back after 0 V brakes an arm that
@@ -31,7 +32,7 @@ from arm_control.control.driver import DriverMode
 from arm_control.control.events import EventKind as Kind, EventLog, quote
 from arm_control.control.feedforward import PeriodFeedforward
 from arm_control.control.goal_runner import GoalRunner
-from arm_control.control.motions import Setpoints
+from arm_control.control.motions import Motion, Setpoints
 from arm_control.control.pid import ArmPid
 from arm_control.control.plans import PlanRequest, PlanTimer, TimedPlan
 from arm_control.control.safety import LEAVES_UNTIL_REACHED, SafetyRules, sure_limits
@@ -39,6 +40,14 @@ from arm_control.control.sensing import Sensing
 from arm_control.control.state_machine import (ArmState as S, COMMANDING, StateMachine,
                                                STOPPED, Trigger as T)
 from arm_control.model.kinematics import TwoLinkKinematics
+
+# A planned motion waits for an arm late on it by more than a period (behind along its path:
+# its first commands held up, a weak start), by that lag less a period, at most WAIT_LIMIT_S
+# in all: an arm that cannot move still meets the tracking-error rule. Driven to catch up, it
+# reaches the plan's braking faster than the plan, at the motors' limits, with only the
+# reserve to brake it. Slower than WAIT_MIN_SPEED_RAD_S the lag along the path is not read.
+WAIT_LIMIT_S = 0.2
+WAIT_MIN_SPEED_RAD_S = 0.5
 
 
 class ArmController:
@@ -71,6 +80,7 @@ class ArmController:
         self.held_when_lost: Optional[np.ndarray] = None  # the goal held as sensors went
         self.lost_motion = None                   # ... or the motion under way then
         self.left_times, self.reached_when_left = 0, 0    # motions left since a goal reached
+        self.waited_on, self.waited_s = None, 0.0         # the motion that waited, how long
         self.estop_holding = False                        # e-stopped, holding (not at 0 V)
         self.voltage = self.feedforward_v = self.feedback_v = np.zeros(2)
         self.saturated = (0, 0)
@@ -244,6 +254,7 @@ class ArmController:
         if self.unpowered:
             self.voltage, self.tracking_error_rad = np.zeros(2), np.zeros(2)
             return self.voltage.copy()
+        self._wait_for_a_late_arm(now_s)
         self.voltage = self._control(now_s, dt_s)
         failure = self.safety.tracking_failed(now_s, self.tracking_error_rad)
         if failure is not None:
@@ -252,6 +263,32 @@ class ArmController:
         elif self._leave_motion(now_s):
             self.voltage = self._control(now_s, dt_s)
         return self.voltage.copy()
+
+    def _wait_for_a_late_arm(self, now_s: float) -> None:
+        """Shift the planned motion in hand later when the arm is behind on it: the lag is
+        the most any joint faster than WAIT_MIN_SPEED_RAD_S is behind, (q_set − q̂)/q̇_set
+        (s); the other joint's feedback then keeps it on the path. Not while a plan is
+        awaited (one from the moving arm starts where the unshifted motion would be) or
+        another motion follows."""
+        timeline = self.setpoints.timeline
+        motion = timeline.at(now_s)
+        if (self.state != S.TRACKING or type(motion) is not Motion
+                or motion is not timeline.last or motion.finished(now_s)
+                or self.goals.plans.pending is not None):
+            return
+        if motion is not self.waited_on:
+            self.waited_on, self.waited_s = motion, 0.0
+        q_set, qd_set, _ = motion.sample(now_s)
+        moving = np.abs(qd_set) >= WAIT_MIN_SPEED_RAD_S
+        if not moving.any():
+            return
+        lag_s = float(np.max((q_set - self.sensing.state[:2])[moving] / qd_set[moving]))
+        delay_s = min(lag_s - self.period_s, WAIT_LIMIT_S - self.waited_s,
+                      now_s - motion.begin_s)       # it stays the motion in charge
+        if delay_s > 0.0:
+            motion.delay(delay_s)
+            self.waited_s += delay_s
+            self.feedforward.reset()                # its reference restarts on the motion
 
     def _leave_motion(self, now_s: float) -> bool:
         """Far off the motion it follows to a goal (its commands held up on the way, as DDS

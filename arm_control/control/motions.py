@@ -55,6 +55,11 @@ class Motion:
     def finished(self, now_s: float) -> bool:
         return now_s >= self.end_s
 
+    def delay(self, delay_s: float) -> None:
+        """The same motion, ``delay_s`` later."""
+        self.begin_s += delay_s
+        self.end_s += delay_s
+
     def rejoined(self, now_s: float, q, qd, position_rad: float, speed_rad_s: float,
                  moving_rad_s: float = 0.3, step_s: float = 0.005) -> Optional['Motion']:
         """The same trajectory, shifted in time to pass through (q, q̇) at ``now_s``, when it
