@@ -19,6 +19,8 @@ the same clock). Beside it, per move, from the configuration the arm started fro
   planner's round trip, the timing in the controller's worker, the hand-over, waiting to
   start, the trajectory, and the rest (the goal's delivery, tracking and settling);
 - the lowest point of either link (mm; below 0 is in the floor);
+- the worst tracking error: the largest gap on either joint between the true arm and the
+  controller's setpoint (``/controller/setpoint``) for the same instant, over the move's runs;
 - kept: the runs that started on a fine trajectory the controller kept: from an earlier
   goal along the same path (each move's runs after its first, from the same start), or
   between presets, which it has kept before the first move (as on a robot that has been on
@@ -117,12 +119,11 @@ class RosMoves:
         if simulated:
             node.set_parameters([Parameter('use_sim_time', value=True)])
         self.truth = []                 # (sim stamp s, shoulder, elbow)
-        node.create_subscription(JointState, '/sim/ground_truth', self.on_truth, 1000)
-
-    def on_truth(self, msg: JointState) -> None:
-        angles = dict(zip(msg.name, msg.position))
-        stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-        self.truth.append((stamp, angles.get('shoulder', math.nan), angles.get('elbow', math.nan)))
+        self.setpoints = []             # (when the command acts s, shoulder, elbow)
+        node.create_subscription(JointState, '/sim/ground_truth',
+                                 lambda msg: self.truth.append(angles(msg)), 1000)
+        node.create_subscription(JointState, '/controller/setpoint',
+                                 lambda msg: self.setpoints.append(angles(msg)), 1000)
 
     def go_to(self, xy):
         """The arm taken to ``xy`` by a goal, at rest: where it rests (rad), or None."""
@@ -138,6 +139,7 @@ class RosMoves:
         rig = self.rig
         began = time.monotonic()
         del self.truth[:]
+        del self.setpoints[:]
         message = PointStamped()
         message.header.frame_id = 'arm_base'
         message.header.stamp = rig.probe.node.get_clock().now().to_msg()
@@ -160,7 +162,28 @@ class RosMoves:
         return {'outcome': kind, 'sentence': sentence,
                 'ros_s': settled_s(rows[:, 0], rows[:, 1:], published_s) if len(rows) else
                 math.nan,
-                'q': rows[:, 1:] if len(rows) else np.zeros((0, 2))}
+                'q': rows[:, 1:] if len(rows) else np.zeros((0, 2)),
+                'tracking_deg': tracking_deg(rows, np.array(self.setpoints))}
+
+
+def angles(msg: JointState) -> tuple:
+    """(stamp s, shoulder rad, elbow rad) of a JointState."""
+    named = dict(zip(msg.name, msg.position))
+    return (msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec,
+            named.get('shoulder', math.nan), named.get('elbow', math.nan))
+
+
+def tracking_deg(truth, setpoints) -> float:
+    """The largest gap on either joint between the true arm and the controller's setpoint
+    for the same instant (deg): the setpoints, stamped with when their command acts,
+    interpolated at the sim's stamps."""
+    if len(truth) == 0 or len(setpoints) < 2:
+        return math.nan
+    inside = (truth[:, 0] >= setpoints[0, 0]) & (truth[:, 0] <= setpoints[-1, 0])
+    gaps = [truth[inside, 1 + k] - np.interp(truth[inside, 0], setpoints[:, 0],
+                                             setpoints[:, 1 + k]) for k in range(2)]
+    wrapped = (np.abs(np.array(gaps)) + math.pi) % (2 * math.pi) - math.pi
+    return math.degrees(float(np.max(np.abs(wrapped)))) if inside.any() else math.nan
 
 
 def in_process_s(arm, controller_config, planner, start_q, goal_xy, seed) -> float:
@@ -270,13 +293,13 @@ def print_table(arm, rows, args, log_dir) -> None:
           f'{getattr(args, "keeping", "")}\n')
     print('| move | ROS s | one process s | minimum s | ROS / min | one process / min | '
           'planner round trip ms | timing ms | hand-over + waiting ms | trajectory s | '
-          'delivery, tracking, settling ms | lowest mm | kept |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+          'delivery, tracking, settling ms | lowest mm | worst tracking error deg | kept |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
     ratios, planning, contact = {False: [], True: []}, [], 0
     for name in dict.fromkeys(row['name'] for row in rows):
         runs = [row for row in rows if row['name'] == name and 'q' in row]
         if not runs:
-            print(f'| {name} | no start | | | | | | | | | | | |')
+            print(f'| {name} | no start | | | | | | | | | | | | |')
             continue
         ros_s = statistics.median(row['ros_s'] for row in runs)
         parts = [breakdown_ms(row['sentence']) for row in runs
@@ -293,6 +316,8 @@ def print_table(arm, rows, args, log_dir) -> None:
         local_s = statistics.median(row['local_s'] for row in runs)
         lowest = min(lowest_mm(arm, row['q']) for row in runs if len(row['q']))
         contact += lowest < 0.0
+        tracked = [row['tracking_deg'] for row in runs if math.isfinite(row['tracking_deg'])]
+        tracking = max(tracked, default=math.nan)
         for row in runs:
             ratios[was_kept(row)].append(row['ros_s'] / row['minimum_s'])
         planning += [p.get('planner round trip', math.nan) + p.get('timing', math.nan)
@@ -302,7 +327,8 @@ def print_table(arm, rows, args, log_dir) -> None:
               f'{fmt(part("planner round trip"), ".0f")} | {fmt(part("timing"), ".0f")} | '
               f'{fmt(part("hand-over") + part("waiting to start"), ".0f")} | '
               f'{fmt(part("trajectory") / 1000.0)} | {fmt(1000.0 * ros_s - known, ".0f")} | '
-              f'{lowest:.0f} | {sum(was_kept(row) for row in runs)}/{len(runs)} |')
+              f'{lowest:.0f} | {fmt(tracking, ".2f")} | '
+              f'{sum(was_kept(row) for row in runs)}/{len(runs)} |')
     bar = 1.25 if args.load else 1.10
     print()
     everything = ratios[False] + ratios[True]

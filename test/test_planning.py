@@ -235,11 +235,12 @@ def test_a_start_inside_the_intake_takes_the_shortest_way_out_first(frc):
 
 
 def test_a_start_inside_the_clearance_steps_out_then_goes_straight_when_it_can(seed_planner):
-    """The elbow 2.6 cm above the floor (arm stretched back, forearm hanging): free, but
-    within the clearance. The shortest path keeps the clearance once out of it: the nearest
-    way out, then the straight segment to the goal, which costs the least there is."""
-    start, goal = np.radians([178.54, -74.04]), np.radians([39.4, -64.1])
+    """The upper arm stretched back, within the clearance of the floor (3/4 of it): free,
+    but within the clearance. The shortest path keeps the clearance once out of it: the
+    nearest way out, then the straight segment to the goal, which costs the least there is."""
     clearance = seed_planner.arm.world.clearance_rad
+    start = np.array([math.pi - 0.75 * clearance, math.radians(-74.04)])
+    goal = np.radians([39.4, -64.1])
     assert seed_planner.forbidden.is_free(start)
     assert not seed_planner.forbidden.clear_by(start, clearance)
     plan = seed_planner.plan_to_configuration(start, goal)
@@ -288,7 +289,7 @@ def test_paths_keep_the_clearance_where_one_can(frc, seed_planner):
 def test_a_goal_inside_the_clearance_is_still_planned_to_in_free_space(seed_planner):
     """No path keeps the clearance to a goal within it: the free one is the answer."""
     planner = seed_planner
-    goal = np.array([math.radians(1.0), math.radians(5.0)])      # 1° above the floor
+    goal = np.array([planner.arm.world.clearance_rad / 2, math.radians(5.0)])   # near the floor
     assert planner.forbidden.is_free(goal) and not planner.clear.forbidden.is_free(goal)
     plan = planner.plan_to_configuration([math.radians(90), math.radians(-90)], goal)
     assert_free_path(planner, plan, goal=goal)
