@@ -214,5 +214,6 @@ def test_a_move_whose_first_commands_are_held_up_waits_for_the_arm_and_keeps_off
         plant.advance(period_s)
         lowest.append(ForbiddenSpace(arm).lowest_point_m(np.array(plant.state[:2])[None])[0])
     said = [str(e) for e in core.events.take()]
-    assert any(e.startswith('goal_reached: reached (-1.700, 0.100)') for e in said), said
+    reached = [e for e in said if e.startswith('goal_reached: reached (-1.700, 0.100)')]
+    assert reached and 'waiting for the arm' in reached[0], said
     assert min(lowest) >= 0.0

@@ -289,6 +289,7 @@ class ArmController:
             motion.delay(delay_s)
             self.waited_s += delay_s
             self.feedforward.reset()                # its reference restarts on the motion
+            self.goals.latency_s['waiting for the arm'] = self.waited_s     # said on arrival
 
     def _leave_motion(self, now_s: float) -> bool:
         """Far off the motion it follows to a goal (its commands held up on the way, as DDS
