@@ -41,7 +41,8 @@ from arm_control.planning.planner import Planner  # noqa: E402
 # (name, start point, its elbow branch (index of free_configurations), goal point), in m.
 MOVES = [('back -> low front, full extension', (-1.0, 1.0), 1, (1.6, 0.12)),
          ('low back -> low front', (-1.5, 0.15), 0, (1.5, 0.15)),
-         ('floor -> full extension, low', (0.6, 0.1), 0, (1.75, 0.1))]
+         ('floor -> full extension, low', (0.6, 0.1), 0, (1.75, 0.1)),
+         ('low front -> far low back', (1.6, 0.1), 0, (-1.7, 0.1))]
 SETTLE_S = 0.5
 MOVE_LIMIT_S = 4.0
 
