@@ -3,15 +3,16 @@ arm_control's code.
 
 A publisher process writes five JointState topics at 50 Hz from a SCHED_FIFO thread (where
 allowed), a subscriber process reads them, and every 2 s a short-lived node joins the
-domain and leaves. The table gives, per QoS and load, how many writes (``publish`` calls)
-took over 20 ms and over 100 ms, and the longest. With Fast DDS a write sends in the
-caller's thread, and it waits for the participant's send resources while the discovery of a
-new participant holds them (eProsima/Fast-DDS#4026); rclpy holds Python's lock meanwhile, so
-the whole process waits. This is what stops the sim's readings and the controller's commands
-for 0.2-0.35 s when a node joins on a loaded machine.
+domain and leaves. The table gives, per transport, QoS and load, how many writes
+(``publish`` calls) took over 20 ms and over 100 ms, and the longest. Discovery stays on
+this machine either way: as Jazzy's LOCALHOST range sets it up (shared memory and UDP), or
+as the nodes do (the same discovery over UDP only, config/fastdds_localhost_udp.xml). With
+shared memory, the first send to a new peer's port checks the port's health, and a failed
+check sleeps 333 ms holding a lock every send of the process waits on; rclpy holds Python's
+lock meanwhile, so the whole process waits.
 
-    python bench/dds_write_block.py                  # 60 s per row, four rows
-    python bench/dds_write_block.py --seconds 30
+    python bench/dds_write_block.py                  # 60 s per row
+    python bench/dds_write_block.py --seconds 30 --qos reliable
 """
 
 import argparse
@@ -23,6 +24,11 @@ import time
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import busy  # noqa: E402
+
+from arm_control.nodes.common import localhost_udp_environment  # noqa: E402
+
+TRANSPORTS = {'shared memory + UDP (LOCALHOST)': {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'},
+              "UDP only (the nodes' profile)": localhost_udp_environment()}
 
 TOPICS = 5
 PERIOD_S = 0.02
@@ -76,9 +82,14 @@ def subscribe(reliability: str, seconds: float) -> None:
         rclpy.spin_once(node, timeout_sec=0.1)
 
 
-def row(reliability: str, loaded: bool, seconds: float, domain: int) -> str:
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-               FASTDDS_BUILTIN_TRANSPORTS=os.environ.get('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4'))
+def row(transport: str, reliability: str, loaded: bool, seconds: float, domain: int) -> str:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), **TRANSPORTS[transport])
+    for name in ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_BUILTIN_TRANSPORTS'):
+        if name not in TRANSPORTS[transport]:
+            env.pop(name, None)
+    # The node that joins is a stock one (a user's `ros2 topic echo`): shared memory and UDP.
+    joiner_env = dict(env, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    joiner_env.pop('FASTRTPS_DEFAULT_PROFILES_FILE', None)
     me = [sys.executable, __file__]
     load = busy.start(2, seconds + 30) if loaded else []
     try:
@@ -89,7 +100,7 @@ def row(reliability: str, loaded: bool, seconds: float, domain: int) -> str:
         joins = 0
         time.sleep(3.0)
         while writer.poll() is None:
-            subprocess.Popen([sys.executable, '-c', JOINER], env=env)
+            subprocess.Popen([sys.executable, '-c', JOINER], env=joiner_env)
             joins += 1
             time.sleep(CHURN_EVERY_S)
         writes, slow20, slow100, worst = writer.stdout.read().split()
@@ -97,7 +108,8 @@ def row(reliability: str, loaded: bool, seconds: float, domain: int) -> str:
     finally:
         busy.stop(load)
     load_name = 'two busy loops' if loaded else 'idle'
-    return (f'| {reliability.replace("_", " ")} | {load_name} | {joins} | {writes} | {slow20} '
+    reliability = reliability.replace('_', ' ')
+    return (f'| {transport} | {reliability} | {load_name} | {joins} | {writes} | {slow20} '
             f'| {slow100} | {worst} |')
 
 
@@ -106,17 +118,22 @@ def main() -> None:
     parser.add_argument('--seconds', type=float, default=60.0, help='per row')
     parser.add_argument('--domain', type=int,
                         default=int(os.environ.get('ROS_DOMAIN_ID', 0)))
+    parser.add_argument('--qos', choices=('reliable', 'best_effort'), nargs='+',
+                        default=['reliable', 'best_effort'])
     parser.add_argument('--role', nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.role:
         role, reliability, seconds = args.role
         (publish if role == 'writer' else subscribe)(reliability, float(seconds))
         return
-    print('| QoS | load | nodes joined | writes | over 20 ms | over 100 ms | longest (ms) |')
-    print('|---|---|---|---|---|---|---|')
+    print('| transport | QoS | load | nodes joined | writes | over 20 ms | over 100 ms '
+          '| longest (ms) |')
+    print('|---|---|---|---|---|---|---|---|')
     for loaded in (False, True):
-        for reliability in ('reliable', 'best_effort'):
-            print(row(reliability, loaded, args.seconds, args.domain), flush=True)
+        for reliability in args.qos:
+            for transport in TRANSPORTS:
+                print(row(transport, reliability, loaded, args.seconds, args.domain),
+                      flush=True)
 
 
 if __name__ == '__main__':

@@ -17,11 +17,12 @@ import time
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
-from arm_control.nodes.common import DDS_TRANSPORT
+from arm_control.nodes.common import localhost_udp_environment
 
 PACKAGE = 'arm_control'
-# The probe and the processes started here use the nodes' transport (see DDS_TRANSPORT).
-os.environ.setdefault(*DDS_TRANSPORT)
+# The probe and the processes started here: discovery on this machine only, over the nodes'
+# transport (see use_udp_transport).
+os.environ.update(localhost_udp_environment())
 DOMAIN_IDS = range(1, 102)       # 0 is the default everyone shares; 101 is the last safe one
 PR_SET_PDEATHSIG = 1             # prctl(2)
 RESEND_S = 3.0                   # an idempotent call unanswered this long is sent again
@@ -60,7 +61,7 @@ def install_prefix() -> Path:
 
 def ros_environment(domain: int) -> dict:
     env = dict(os.environ)
-    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+    env.update(ROS_DOMAIN_ID=str(domain),
                PYTHONUNBUFFERED='1', RCUTILS_COLORIZED_OUTPUT='0')
     return env
 

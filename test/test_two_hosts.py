@@ -73,6 +73,7 @@ def environment(domain: int) -> dict:
                FASTDDS_BUILTIN_TRANSPORTS='UDPv4', PYTHONUNBUFFERED='1',
                RCUTILS_COLORIZED_OUTPUT='0')
     env.pop('ROS_STATIC_PEERS', None)
+    env.pop('FASTRTPS_DEFAULT_PROFILES_FILE', None)     # the harness's localhost-only profile
     return env
 
 

@@ -29,11 +29,31 @@ LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
 COMMANDS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 STATE_STREAM = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
-# Fast DDS's shared-memory transport ties the processes together: a peer that stops (SIGSTOP,
-# a debugger) or starts can hold another node's loop for 0.3-0.8 s while its ports are
-# checked. Over a 10-minute soak: 9 such stalls of the controller, against 1 with loopback
-# UDP, which costs nothing at 50 Hz. Set before rclpy.init; a value the user set is kept.
-DDS_TRANSPORT = ('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
+# Fast DDS's shared-memory transport ties the processes together: the first send to a new
+# peer's port checks the port's health, and a failed check sleeps 333 ms holding a lock every
+# send of the process waits on, while rclpy keeps Python's lock (config/fastdds_localhost_udp.xml).
+# So the nodes talk over UDP. Jazzy's LOCALHOST discovery adds shared memory of its own and
+# ignores FASTDDS_BUILTIN_TRANSPORTS; there the same discovery comes from an XML profile.
+LOCALHOST_UDP_PROFILE = 'fastdds_localhost_udp.xml'
+
+
+def localhost_udp_environment() -> dict:
+    """The variables that give LOCALHOST discovery over UDP only (Fast DDS 2.x's name for
+    the profile file; the profile names its peers, so the RMW must not add its own)."""
+    return {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SYSTEM_DEFAULT',
+            'FASTRTPS_DEFAULT_PROFILES_FILE': str(default_parameter_file(LOCALHOST_UDP_PROFILE))}
+
+
+def use_udp_transport(environ=os.environ) -> None:
+    """Before rclpy.init: Fast DDS over UDP, with the discovery range asked for. A profile,
+    a transport or static peers the user set are kept."""
+    chosen = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_BUILTIN_TRANSPORTS', 'ROS_STATIC_PEERS')
+    if environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE') == 'LOCALHOST' and \
+            not any(environ.get(name) for name in chosen):
+        environ.update(localhost_udp_environment())
+    else:
+        environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
+
 
 # The controller's diagnostics key saying whether its client reaches the planner.
 PLANNER_AVAILABLE = 'planner available'
@@ -202,7 +222,7 @@ def run(node_class, args=None) -> int:
 
     A bad parameter stops the node at start with the parameter named (exit code 2).
     """
-    os.environ.setdefault(*DDS_TRANSPORT)
+    use_udp_transport()
     # Python's handler for SIGINT, marking the stop: rclpy's, installed by init, runs first
     # and then this one. A Ctrl-C that lands while rclpy converts a message taken surfaces
     # as "Unable to convert call argument" before rclpy has shut the context down, and the
