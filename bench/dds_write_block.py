@@ -3,13 +3,15 @@ arm_control's code.
 
 A publisher process writes five JointState topics at 50 Hz from a SCHED_FIFO thread (where
 allowed), a subscriber process reads them, and every 2 s a short-lived node joins the
-domain and leaves. The table gives, per transport, QoS and load, how many writes
-(``publish`` calls) took over 20 ms and over 100 ms, and the longest. Discovery stays on
-this machine either way: as Jazzy's LOCALHOST range sets it up (shared memory and UDP), or
-as the nodes do (the same discovery over UDP only, config/fastdds_localhost_udp.xml). With
-shared memory, the first send to a new peer's port checks the port's health, and a failed
-check sleeps 333 ms holding a lock every send of the process waits on; rclpy holds Python's
-lock meanwhile, so the whole process waits.
+domain, subscribes to one topic, pauses itself (a debugger, SIGSTOP, a process the
+scheduler starves) and is resumed 2 s later. The table gives, per transport, QoS and load,
+how many writes (``publish`` calls) took over 20 ms and over 100 ms, and the longest.
+Discovery stays on this machine either way: as Jazzy's LOCALHOST range sets it up (shared
+memory and UDP), or as the nodes do (the same discovery over UDP only,
+config/fastdds_localhost_udp.xml). With shared memory, the first send to a new peer's port
+checks the port's health, and a failed check (the peer is paused) sleeps 333 ms holding a
+lock every send of the process waits on; rclpy holds Python's lock meanwhile, so the whole
+process waits.
 
     python bench/dds_write_block.py                  # 60 s per row
     python bench/dds_write_block.py --seconds 30 --qos reliable
@@ -18,6 +20,7 @@ lock meanwhile, so the whole process waits.
 import argparse
 import os
 from pathlib import Path
+import signal
 import subprocess
 import sys
 import time
@@ -33,7 +36,13 @@ TRANSPORTS = {'shared memory + UDP (LOCALHOST)': {'ROS_AUTOMATIC_DISCOVERY_RANGE
 TOPICS = 5
 PERIOD_S = 0.02
 CHURN_EVERY_S = 2.0
-JOINER = 'import rclpy, time; rclpy.init(); node = rclpy.create_node("joiner"); time.sleep(1.5)'
+JOINER = ('import os, signal, time, rclpy; from rclpy.qos import qos_profile_sensor_data; '
+          'from sensor_msgs.msg import JointState; rclpy.init(); '
+          'node = rclpy.create_node("joiner"); '
+          'node.create_subscription(JointState, "block_test_0", lambda _: None, '
+          'qos_profile_sensor_data); '
+          'time.sleep(0.2); os.kill(os.getpid(), signal.SIGSTOP); '
+          'rclpy.spin_once(node, timeout_sec=0.5)')
 
 
 def qos(reliability: str):
@@ -97,12 +106,13 @@ def row(transport: str, reliability: str, loaded: bool, seconds: float, domain: 
                                   env=env)
         writer = subprocess.Popen(me + ['--role', 'writer', reliability, str(seconds)],
                                   env=env, stdout=subprocess.PIPE, text=True)
-        joins = 0
+        joiners = []
         time.sleep(3.0)
         while writer.poll() is None:
-            subprocess.Popen([sys.executable, '-c', JOINER], env=joiner_env)
-            joins += 1
+            joiners.append(subprocess.Popen([sys.executable, '-c', JOINER], env=joiner_env))
             time.sleep(CHURN_EVERY_S)
+            joiners[-1].send_signal(signal.SIGCONT)
+        joins = len(joiners)
         writes, slow20, slow100, worst = writer.stdout.read().split()
         reader.wait()                                # it ends by itself, soon after
     finally:

@@ -51,8 +51,8 @@ def launch(domain, tmp_path):
     from ros_harness import NodeProcess
     started = []
 
-    def start(name, *ros_args):
-        process = NodeProcess(name, domain, ros_args, tmp_path)
+    def start(name, *ros_args, environment=None):
+        process = NodeProcess(name, domain, ros_args, tmp_path, environment)
         started.append(process)
         return process
 

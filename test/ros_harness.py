@@ -76,7 +76,9 @@ def _end_with_parent() -> None:
 class NodeProcess:
     """An installed executable, ``ros2 run arm_control <name>`` style, in its own process."""
 
-    def __init__(self, name: str, domain: int, ros_args=(), log_dir: Path | None = None):
+    def __init__(self, name: str, domain: int, ros_args=(), log_dir: Path | None = None,
+                 environment: dict | None = None):
+        """``environment``: variables to set on top of the domain's, or to unset (None)."""
         self.name = name
         executable = install_prefix() / 'lib' / PACKAGE / name
         self.log_path = Path(log_dir or tempfile.mkdtemp()) / f'{name}.log'
@@ -84,7 +86,13 @@ class NodeProcess:
         command = [str(executable)]
         if ros_args:
             command += ['--ros-args', *ros_args]
-        self.process = subprocess.Popen(command, env=ros_environment(domain), stdout=self.log,
+        env = ros_environment(domain)
+        for variable, value in (environment or {}).items():
+            if value is None:
+                env.pop(variable, None)
+            else:
+                env[variable] = value
+        self.process = subprocess.Popen(command, env=env, stdout=self.log,
                                         stderr=subprocess.STDOUT, start_new_session=True,
                                         preexec_fn=_end_with_parent)
 

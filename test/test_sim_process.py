@@ -1,6 +1,7 @@
 """The installed ``sim`` executable, as its own process, seen from another over DDS."""
 
 import math
+from pathlib import Path
 import time
 
 import pytest
@@ -26,6 +27,17 @@ def test_joint_states_at_the_configured_rate(launch, probe):
     assert list(message.name) == ['shoulder', 'elbow']
     assert len(message.position) == len(message.velocity) == len(message.effort) == 2
     assert sim.alive()
+
+
+def test_under_localhost_discovery_it_talks_over_udp_not_shared_memory(launch, probe):
+    """Jazzy's LOCALHOST range adds Fast DDS shared memory, whose port checks can freeze a
+    process for 333 ms; the node keeps the range and drops the shared memory."""
+    sim = launch('sim', environment={'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+                                     'FASTRTPS_DEFAULT_PROFILES_FILE': None})
+    received = probe.collect(JointState, '/joint_states')
+    wait_for_messages(probe, received, 3)
+    mapped = Path(f'/proc/{sim.process.pid}/maps').read_text()
+    assert '/dev/shm/fastrtps' not in mapped
 
 
 def test_arm_rests_then_falls_from_horizontal_at_zero_volts(launch, probe):

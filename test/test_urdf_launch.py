@@ -8,7 +8,7 @@ with which parameters and conditions.
 import ast
 import importlib.util
 import math
-from pathlib import Path
+from pathlib import Path, PurePath
 import sys
 import tempfile
 import types
@@ -229,7 +229,9 @@ def test_launch_starts_sim_controller_planner_from_the_parameter_files(launch_de
     default = declared['params_file']['default_value']
     package, folder, name = default.args[0]
     assert package.args == ('arm_control',) and (folder, name) == ('config', 'arm.yaml')
-    assert data_file_globs()['share/arm_control/config'] == 'config/*.yaml'
+    installed = data_file_globs()['share/arm_control/config']
+    assert all(PurePath(f'config/{name}').match(installed)
+               for name in ('arm.yaml', 'frc_robot.yaml', 'fastdds_localhost_udp.xml'))
 
 
 def test_the_robot_file_comes_after_the_arm_file_for_every_node(launch_description, tmp_path):
