@@ -45,6 +45,7 @@ import numpy as np  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from arm_control import config  # noqa: E402
+from arm_control.control.events import EventKind, parse_event  # noqa: E402
 from arm_control.control.goals import GoalValidator  # noqa: E402
 from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
@@ -78,15 +79,10 @@ def random_free_goal(rng: random.Random):
             return float(x), float(y)
 
 
-def reason_of(event: str) -> str:
-    """The reason a goal was refused, with numbers blanked so alike ones count together."""
-    for marker in ('rejected: ', 'failed: ', 'rejected'):
-        if marker in event:
-            reason = event.split(marker, 1)[1] if marker.endswith(' ') else event
-            break
-    else:
-        return event
-    return re.sub(r'[-+]?\d[\d.e+-]*', '#', reason)[:90]
+def reason_of(sentence: str) -> str:
+    """An event's sentence with numbers blanked, so that alike ones count together."""
+    sentence = re.sub(r'^(goal rejected|E-STOP): ', '', sentence)
+    return re.sub(r'[-+]?\d[\d.e+-]*', '#', sentence)[:90]
 
 
 class Soak:
@@ -192,13 +188,12 @@ def contact_runs(rig: ArmRig):
 
 
 def report(soak: Soak, rig: ArmRig, minutes: float) -> None:
-    events = rig.events_heard()
-    reached = [e for e in events if e.startswith('reached')]
-    refused = [e for e in events if ('rejected' in e or 'failed' in e)
-               and not e.startswith('reached')]
-    reasons = Counter(reason_of(e) for e in refused)
-    estops = Counter(reason_of(e.split('E-STOP: ', 1)[1].split(';')[0]) for e in events
-                     if e.startswith('E-STOP'))
+    events = [parse_event(text) for text in rig.events_heard()]
+    kinds = Counter(kind for kind, _, _ in events)
+    refused = Counter(reason_of(sentence) for kind, _, sentence in events
+                      if kind in (EventKind.GOAL_REJECTED, EventKind.GOAL_FAILED))
+    estops = Counter(cause or reason_of(sentence) for kind, cause, sentence in events
+                     if kind in (EventKind.ESTOP, EventKind.CONTROL_FAILED))
     print(f'\n## Soak: {minutes:g} min, {soak.sent["good"]} good goals and {soak.sent["bad"]} '
           f'bad ones sent\n')
     print('| faults injected | count |\n|---|---|')
@@ -207,10 +202,13 @@ def report(soak: Soak, rig: ArmRig, minutes: float) -> None:
             print(f'| {name} | {count} |')
     print('\n| goals | count |\n|---|---|')
     print(f'| sent (good + bad) | {soak.sent["good"] + soak.sent["bad"]} |')
-    print(f'| reached | {len(reached)} |')
-    print(f'| rejected or failed, with the reason | {len(refused)} |')
-    for reason, count in reasons.most_common():
+    print(f'| reached | {kinds[EventKind.GOAL_REACHED.value]} |')
+    print(f'| rejected or failed, with the reason | {sum(refused.values())} |')
+    for reason, count in refused.most_common():
         print(f'| &nbsp;&nbsp;{reason} | {count} |')
+    print(f'| rejections beyond the burst, counted in one event | '
+          f'{kinds[EventKind.GOALS_REJECTED.value]} |')
+    print(f'| dropped (cancelled) | {kinds[EventKind.CANCELLED.value]} |')
     print(f'| e-stops (by reason) | {sum(estops.values())} |')
     for reason, count in estops.most_common():
         print(f'| &nbsp;&nbsp;{reason} | {count} |')
