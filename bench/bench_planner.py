@@ -49,18 +49,22 @@ def queries(planner, count, rng):
 
 
 def latencies_ms(planner, pairs):
-    """Wall-clock ms of each ``plan`` call, and of the graph searches within it."""
-    searching = planner.grid.shortest_paths
+    """Wall-clock ms of each ``plan`` call, and of the graph searches within it (on the
+    grid itself and on the one grown by the clearance, where plans are made first)."""
     search_s = [0.0]
 
-    def timed_search(*args, **kwargs):
-        began = time.perf_counter()
-        try:
-            return searching(*args, **kwargs)
-        finally:
-            search_s[0] += time.perf_counter() - began
+    def timed(searching):
+        def timed_search(*args, **kwargs):
+            began = time.perf_counter()
+            try:
+                return searching(*args, **kwargs)
+            finally:
+                search_s[0] += time.perf_counter() - began
+        return timed_search
 
-    planner.grid.shortest_paths = timed_search
+    for each in (planner, planner.clear):
+        if each is not None:
+            each.grid.shortest_paths = timed(each.grid.shortest_paths)
     samples, searches, planned = [], [], 0
     for start, goal in pairs:
         search_s[0] = 0.0
@@ -79,13 +83,13 @@ def main():
     pairs = queries(reference, 10 if quick else 40, np.random.default_rng(SEED))
     heap_pairs = pairs[:5 if quick else 15]
     print(f'FRC robot, {len(pairs)} seeded queries that need a search (heapq: the first '
-          f'{len(heap_pairs)}); check step {math.degrees(base.check_step_rad):.2f} deg; '
+          f'{len(heap_pairs)}); check step {math.degrees(arm.world.check_step_rad):.2f} deg; '
           f'load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores\n')
     print('| grid | cells | start-up (lazy edges) | + every edge checked | search | '
           'queries planned | median | p95 | max | search alone, median |')
     print('|---|---|---|---|---|---|---|---|---|---|')
     for resolution_deg in RESOLUTIONS_DEG:
-        planner_config = PlannerConfig(math.radians(resolution_deg), base.check_step_rad)
+        planner_config = PlannerConfig(math.radians(resolution_deg))
         began = time.perf_counter()
         eager = Planner(arm, planner_config)
         startup_s = time.perf_counter() - began
