@@ -202,13 +202,13 @@ def report(soak: Soak, rig: ArmRig, minutes: float) -> None:
             print(f'| {name} | {count} |')
     print('\n| goals | count |\n|---|---|')
     print(f'| sent (good + bad) | {soak.sent["good"] + soak.sent["bad"]} |')
-    print(f'| reached | {kinds[EventKind.GOAL_REACHED.value]} |')
+    print(f'| reached | {kinds[EventKind.GOAL_REACHED]} |')
     print(f'| rejected or failed, with the reason | {sum(refused.values())} |')
     for reason, count in refused.most_common():
         print(f'| &nbsp;&nbsp;{reason} | {count} |')
     print(f'| rejections beyond the burst, counted in one event | '
-          f'{kinds[EventKind.GOALS_REJECTED.value]} |')
-    print(f'| dropped (cancelled) | {kinds[EventKind.CANCELLED.value]} |')
+          f'{kinds[EventKind.GOALS_REJECTED]} |')
+    print(f'| dropped (cancelled) | {kinds[EventKind.CANCELLED]} |')
     print(f'| e-stops (by reason) | {sum(estops.values())} |')
     for reason, count in estops.most_common():
         print(f'| &nbsp;&nbsp;{reason} | {count} |')
