@@ -13,8 +13,8 @@ A plan from rest is answered twice: first a quick trajectory the arm starts on a
 its refinement (``PlanTimer.refine``) from a hand-over time a safe margin past when the
 refinement is expected to be ready -- unless a newer request is already waiting -- and,
 when it took so long that it surely came too late, once more from later on. At start-up,
-once ready, the worker answers a move between two presets for itself, so the first goal
-finds its caches warm.
+before it says it is ready, the worker answers a move between two presets for itself, so
+the first goal finds its caches warm.
 
 Each path answered from rest then goes to the keeper, a second process at nice
 ``KEEPER_NICE``, which times it finely from rest; the worker keeps what comes back
@@ -110,11 +110,15 @@ def _serve(requests: Connection, results: Connection) -> None:
                 keeping.retune(item)
                 results.send(('kept', 0))
                 if first:
-                    results.send(None)                      # ready
-                    # The moving-start solver's import (0.8 s) done meanwhile, not at the
-                    # first goal that preempts another.
-                    threading.Thread(target=toppra_solver, daemon=True).start()
+                    # Ready once warm: the moving-start solver imported (0.8 s) and a first
+                    # move timed. Said ready before, the first goal waited for both, and
+                    # on a starved machine (the sim and the controller at 4x simulated time
+                    # take a core at real-time priority) that took seconds.
+                    importing = threading.Thread(target=toppra_solver, daemon=True)
+                    importing.start()
                     _warm_up(timer, clock)
+                    importing.join()
+                    results.send(None)                      # ready
             elif item[0] == 'keeping':
                 keeping.allow(item[1])
             elif item[0] == 'keep':
