@@ -116,6 +116,18 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
+def thread_cpu_s(pid: int) -> dict:
+    """CPU time each thread of a process has used, by thread id (/proc/<pid>/task), s."""
+    used = {}
+    for task in Path(f'/proc/{pid}/task').iterdir():
+        try:
+            fields = (task / 'stat').read_text().rsplit(')', 1)[1].split()
+        except OSError:                     # the thread ended meanwhile
+            continue
+        used[int(task.name)] = (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+    return used
+
+
 def periods(times) -> np.ndarray:
     return np.diff(np.asarray(times, float))
 
@@ -189,6 +201,9 @@ class ArmRig:
 
     def cpu_s(self, name: str) -> float:
         return cpu_s(self.processes[name].process.pid)
+
+    def thread_cpu_s(self, name: str) -> dict:
+        return thread_cpu_s(self.processes[name].process.pid)
 
     def output(self, name: str) -> str:
         return self.processes[name].output()

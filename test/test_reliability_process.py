@@ -123,17 +123,25 @@ def test_malformed_sensor_and_voltage_messages_are_ignored(rig):
     assert rig.processes['sim'].alive() and rig.processes['controller'].alive()
 
 
-def test_at_rest_each_node_uses_a_small_share_of_a_core(rig):
-    """Holding the arm costs the controller about 15 % of a core and the sim less; a
-    busy-waiting thread (OpenBLAS's, once) takes a whole core of the two the arm may have."""
+def test_at_rest_no_node_spins_a_core(rig):
+    """Holding the arm costs the controller about 15 % of a core and the sim 7 % here (a CI
+    machine has shown 4 times that, the same for both). A busy-waiting thread spins a whole
+    core of the two the arm may have, however fast the machine: OpenBLAS's idle threads did,
+    and the controller took 118 %. So: no thread near a core, and no node a core."""
     assert rig.wait_still()
     names = ('sim', 'planner', 'controller')
-    before, began = [rig.cpu_s(name) for name in names], time.monotonic()
+    before = {name: rig.thread_cpu_s(name) for name in names}
+    began = time.monotonic()
     rig.spin_for(5.0)
     seconds = time.monotonic() - began
-    share = {name: (rig.cpu_s(name) - used) / seconds for name, used in zip(names, before)}
-    print('share of a core at rest: ' + ', '.join(f'{n} {s:.0%}' for n, s in share.items()))
-    assert all(s < 0.5 for s in share.values()), share
+    threads = {name: {tid: (used - before[name].get(tid, 0.0)) / seconds
+                      for tid, used in rig.thread_cpu_s(name).items()} for name in names}
+    share = {name: sum(threads[name].values()) for name in names}
+    busiest = {name: max(threads[name].values()) for name in names}
+    print('share of a core at rest: ' + ', '.join(
+        f'{n} {share[n]:.0%} (busiest thread {busiest[n]:.0%})' for n in names))
+    assert all(s < 0.5 for s in busiest.values()), f'busiest thread of each node: {busiest}'
+    assert all(s < 1.0 for s in share.values()), share
 
 
 def test_flood_of_goals_bounded_memory_and_loop_rate(rig):
