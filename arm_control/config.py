@@ -242,6 +242,7 @@ class ControllerConfig:
 
     loop_rate_hz: float
     realtime_priority: int          # SCHED_FIFO priority of the loop's thread; 0: normal
+    planning_priority: int          # SCHED_FIFO priority of a goal's quick timing; 0: normal
     goal_tolerance_rad: float
     settled_velocity_rad_s: float
     dwell_s: float
@@ -287,6 +288,7 @@ class ControllerConfig:
         return cls(
             loop_rate_hz=read.number('loop_rate_hz', low=0.0, high=1000.0, low_open=True),
             realtime_priority=read.integer('realtime_priority', low=0, high=98),
+            planning_priority=read.integer('planning_priority', low=0, high=98),
             goal_tolerance_rad=read.positive('goal_tolerance_rad'),
             settled_velocity_rad_s=read.positive('settled_velocity_rad_s'),
             dwell_s=read.nonnegative('dwell_s'),
@@ -323,14 +325,16 @@ class ControllerConfig:
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    """The configuration-space grid."""
+    """The configuration-space grid, and the priority of an answer."""
 
     grid_resolution_rad: float
+    realtime_priority: int = 0      # SCHED_FIFO priority while answering plan_path; 0: normal
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'PlannerConfig':
         read = Reader(params)
-        return cls(grid_resolution_rad=read.number('grid_resolution_rad', low=0.001, high=0.2))
+        return cls(grid_resolution_rad=read.number('grid_resolution_rad', low=0.001, high=0.2),
+                   realtime_priority=read.integer('realtime_priority', low=0, high=98))
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ the same clock). Beside it, per move, from the configuration the arm started fro
     python bench/bench_ros.py --sim-speed 5    # in simulated time, 5x real time
     python bench/bench_ros.py --moves 4,5 --repeats 3
     python bench/bench_ros.py --param feedback_voltage_reserve:=0.5
+    python bench/bench_ros.py --param planning_priority:=0 --planner-param realtime_priority:=0
 
 Needs the package built and sourced. Not a test: it prints a table and asserts nothing.
 """
@@ -206,10 +207,11 @@ def run(args) -> list:
         name: type(getattr(controller_config, name))(float(value))
         for name, value in overrides.items()})
     moves = [SUITE[i] for i in args.moves] if args.moves else SUITE
-    node_args = {'controller': tuple(arg for param in args.param for arg in ('-p', param))}
+    node_args = {'controller': tuple(arg for param in args.param for arg in ('-p', param)),
+                 'planner': tuple(arg for param in args.planner_param for arg in ('-p', param))}
     if args.sim_speed:
         node_args = {'sim': ('-p', f'sim_time_factor:={args.sim_speed:g}'),
-                     'planner': ('-p', 'use_sim_time:=true'),
+                     'planner': node_args['planner'] + ('-p', 'use_sim_time:=true'),
                      'controller': node_args['controller'] + ('-p', 'use_sim_time:=true')}
     loops = busy.start(2, LOAD_BUDGET_S) if args.load else []
     rows = []
@@ -288,7 +290,7 @@ def print_table(arm, rows, args, log_dir) -> None:
         f'{getattr(args, "late_commands", "?")} commands came late for their period)'
         if args.sim_speed else 'real time',
         f'{args.repeats} runs a move (the median)' if args.repeats > 1 else '',
-        ', '.join(args.param)]))
+        ', '.join(args.param), ', '.join(f'planner {p}' for p in args.planner_param)]))
     print(f'\nMoves through ROS ({conditions}); node logs in {log_dir}; '
           f'{getattr(args, "keeping", "")}\n')
     print('| move | ROS s | one process s | minimum s | ROS / min | one process / min | '
@@ -363,6 +365,8 @@ def main():
     parser.add_argument('--param', action='append', default=[],
                         help="a numeric controller parameter, 'name:=value' (repeatable), "
                              'for the node and the one-process run alike')
+    parser.add_argument('--planner-param', action='append', default=[],
+                        help="a planner parameter, 'name:=value' (repeatable)")
     run(parser.parse_args())
 
 

@@ -11,7 +11,8 @@ A goal from rest goes the way it goes through ROS, each step called as the nodes
 - quick: what the worker answers at once (``PlanTimer.time_plan(quick=True)``): the path
   checked and timed on a few dozen stages, not bent. The arm starts on it;
 - the user waits for planner + quick (the round trips through DDS and the pipe to the
-  worker come on top: about a millisecond each);
+  worker come on top: about a millisecond each). The nodes run both at real-time priority
+  (``planner.realtime_priority``, ``controller.planning_priority``), and so does this bench;
 - refine: what the worker does next while the arm moves (``PlanTimer.refine``): the rest
   of the path bent and timed finely from the hand-over time (``HandoverClock``, from the
   quick timing's wall time), which takes over there if it is ready by then.
@@ -46,6 +47,7 @@ from arm_control.control.plans import PlanRequest, PlanTimer, PresetAnswers  # n
 from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
 from arm_control.nodes.plan_worker import HandoverClock  # noqa: E402
+from arm_control.nodes.realtime import raised  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
 
 PLANNING_REPEATS = 10
@@ -85,11 +87,15 @@ def _timed(call):
     return result, time.thread_time() - cpu, time.perf_counter() - wall
 
 
-def one_goal(answers, timer, clock, request):
-    """The steps of one goal, as the nodes run them: {step: (CPU s, wall s)} and durations."""
-    plan, plan_cpu, plan_wall = _timed(
-        lambda: answers.plan(request.start_q, request.goal.xy))
-    quick, quick_cpu, quick_wall = _timed(lambda: timer.time_plan(request, plan, quick=True))
+def one_goal(answers, timer, clock, request, planner_priority=0):
+    """The steps of one goal, as the nodes run them (the planner's answer and the quick
+    timing at their real-time priorities): {step: (CPU s, wall s)} and durations."""
+    with raised(planner_priority):
+        plan, plan_cpu, plan_wall = _timed(
+            lambda: answers.plan(request.start_q, request.goal.xy))
+    with raised(timer.config.planning_priority):
+        quick, quick_cpu, quick_wall = _timed(
+            lambda: timer.time_plan(request, plan, quick=True))
     handover = clock.handover_s(quick_wall, quick.trajectory.duration_s if quick.ok else 0.0)
     refined, refine_cpu, refine_wall = _timed(lambda: timer.refine(quick, handover))
     clock.seen(quick_wall, refine_wall)
@@ -104,7 +110,8 @@ def one_goal(answers, timer, clock, request):
 def planning_times(files=(), repeats=PLANNING_REPEATS):
     """Rows per move, the pooled user waits (CPU, wall; ms) and the first goal's wall ms."""
     arm, controller = config.load('controller', *files)
-    planner = Planner(arm, config.load('planner', *files)[1])
+    planner_config = config.load('planner', *files)[1]
+    planner = Planner(arm, planner_config)
     timer, clock = PlanTimer(arm, controller), HandoverClock()
     for q in timer.ranking.preset_configurations():      # as the node does at start-up
         planner.prepare(q)
@@ -117,7 +124,7 @@ def planning_times(files=(), repeats=PLANNING_REPEATS):
     samples = {r.goal.label: [] for r in requests}
     for repeat in range(repeats + 1):
         for request in requests:
-            steps = one_goal(answers, timer, clock, request)
+            steps = one_goal(answers, timer, clock, request, planner_config.realtime_priority)
             if first is None:          # the first goal of a fresh planner and worker
                 first = 1e3 * (steps['planner'][1] + steps['quick'][1])
             if repeat > 0:

@@ -186,7 +186,7 @@ class PlanTimer:
     """Checks and times plans for one arm and controller configuration."""
 
     def __init__(self, arm: ArmConfig, config: ControllerConfig):
-        self.arm = arm
+        self.arm, self.config = arm, config
         self.dynamics = ArmDynamics(arm)
         self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
         self.forbidden = ForbiddenSpace(arm)

@@ -42,6 +42,7 @@ from arm_control.config import ArmConfig
 from arm_control.control.goals import Goal
 from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
 from arm_control.control.trajectory.moving_start import toppra_solver
+from arm_control.nodes.realtime import raised
 
 
 # The refinement's hand-over comes this many times its expected time after the quick
@@ -308,7 +309,8 @@ def _answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, 
     from_rest = request.start_time_s is None
     began = time.perf_counter()
     try:
-        timed = timer.time_plan(request, plan, quick=from_rest)
+        with raised(timer.config.planning_priority):     # the arm waits for this one
+            timed = timer.time_plan(request, plan, quick=from_rest)
     except Exception as error:              # never leave a goal hanging
         timed = TimedPlan(request, None, f'timing the plan failed: {error!r}')
     send(timed)
