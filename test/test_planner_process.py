@@ -1,6 +1,7 @@
 """The installed ``planner`` executable, as its own process, asked for plans over DDS."""
 
 import math
+import os
 from pathlib import Path
 
 from geometry_msgs.msg import PoseStamped
@@ -100,6 +101,32 @@ def test_plans_over_the_top_and_latches_the_path_and_the_map(launch, probe, frc)
     assert cell_value(np.radians([90.0, -90.0])) == 0      # upper arm up, forearm level
     assert cell_value(np.radians([90.0, 60.0])) == 100     # forearm through the height limit
     assert planner.alive()
+
+
+def test_once_prepared_every_thread_of_the_planner_runs_at_its_priority(launch, probe):
+    """A goal must not wait behind busy processes for its plan: once the planner has its
+    preset answers, all its threads (DDS's that receive a request too) are SCHED_FIFO at
+    ``realtime_priority``; where the system refuses, the node says how to allow it."""
+    _, planner_config = config.load('planner')
+    planner = launch('planner')
+    pid = planner.process.pid
+
+    def policies():
+        found = set()
+        for task in Path(f'/proc/{pid}/task').iterdir():
+            try:
+                found.add((os.sched_getscheduler(int(task.name)),
+                           os.sched_getparam(int(task.name)).sched_priority))
+            except ProcessLookupError:                      # a thread that ended meanwhile
+                pass
+        return found
+    fifo = {(os.SCHED_FIFO, planner_config.realtime_priority)}
+    assert probe.spin_until(lambda: policies() == fifo
+                            or 'real-time priority' in planner.output(), 30.0), policies()
+    if 'real-time priority' in planner.output():
+        assert 'rtprio' in planner.output()                 # how to allow it
+    else:
+        assert policies() == fifo
 
 
 def test_bad_requests_get_an_empty_path_and_the_node_lives(launch, probe, frc):
