@@ -85,8 +85,7 @@ class PlannerNode(Node):
         self.last_message = 'no request yet'
         self.last_ok = True
         self.last_latency_s = math.nan
-        self.priority_problem = None         # why the planner could not run at real time
-        self.scheduling = 'normal (preparing)'
+        self.scheduling = 'normal (preparing)'   # or why real-time priority was refused
 
         self.path_pub = self.create_publisher(Path, 'planned_path', LATCHED)
         self.map_pub = self.create_publisher(OccupancyGrid, 'cspace_map', LATCHED)
@@ -129,12 +128,11 @@ class PlannerNode(Node):
         DDS threads that receive a request included) runs at ``realtime_priority``, so that
         a goal does not wait behind busy processes for its plan. Under two busy loops, at
         normal priority the planner's work took twice its CPU time."""
-        self.priority_problem = realtime.raise_process(self.config.realtime_priority)
-        if self.priority_problem:
-            self.get_logger().warning(self.priority_problem)
-        self.scheduling = self.priority_problem or (
-            f'SCHED_FIFO {self.config.realtime_priority}' if self.config.realtime_priority
-            else 'normal')
+        problem = realtime.raise_process(self.config.realtime_priority)
+        if problem:
+            self.get_logger().warning(problem)
+        self.scheduling = problem or (f'SCHED_FIFO {self.config.realtime_priority}'
+                                      if self.config.realtime_priority else 'normal')
 
     # plan_path
 
