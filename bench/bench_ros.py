@@ -38,7 +38,7 @@ Needs the package built and sourced. Not a test: it prints a table and asserts n
 """
 
 import argparse
-from contextlib import nullcontext
+from contextlib import contextmanager, nullcontext
 import dataclasses
 import math
 from pathlib import Path
@@ -200,6 +200,26 @@ def fmt(value, spec='.3f') -> str:
     return '-' if value is None or not math.isfinite(value) else format(value, spec)
 
 
+@contextmanager
+def nodes(name: str, node_args: dict, load: bool, domain=None):
+    """The rig (``ArmRig``) of the three nodes on a ROS domain of their own (``domain``, else
+    a free one), two busy loops beside them under ``load``; the caller starts the nodes, and
+    they are closed on the way out."""
+    loops = busy.start(2, LOAD_BUDGET_S) if load else []
+    try:
+        with ros_domain() if domain is None else nullcontext(domain) as domain:
+            probe = Probe(domain, name)
+            rig = ArmRig(domain, probe, Path(tempfile.mkdtemp(prefix=f'arm_{name}_')),
+                         node_args)
+            try:
+                yield rig
+            finally:
+                rig.close()
+                probe.close()
+    finally:
+        busy.stop(loops)
+
+
 def run(args) -> list:
     arm, controller_config = config.load('controller')
     overrides = dict(param.split(':=', 1) for param in args.param)
@@ -213,44 +233,32 @@ def run(args) -> list:
         node_args = {'sim': ('-p', f'sim_time_factor:={args.sim_speed:g}'),
                      'planner': node_args['planner'] + ('-p', 'use_sim_time:=true'),
                      'controller': node_args['controller'] + ('-p', 'use_sim_time:=true')}
-    loops = busy.start(2, LOAD_BUDGET_S) if args.load else []
     rows = []
-    try:
-        with ros_domain() if args.domain is None else nullcontext(args.domain) as domain:
-            probe = Probe(domain, 'bench_ros')
-            rig = ArmRig(domain, probe, Path(tempfile.mkdtemp(prefix='arm_bench_ros_')),
-                         node_args)
-            ros = RosMoves(rig, bool(args.sim_speed))
-            clock = []                              # (wall s, sim s) of each /clock
-            if args.sim_speed:
-                probe.node.create_subscription(Clock, '/clock', lambda m: clock.append(
-                    (time.monotonic(), m.clock.sec + 1e-9 * m.clock.nanosec)), 100)
-            try:
-                rig.start_all()
-                rig.ready(90.0)
-                args.keeping = wait_for_presets_kept(rig, arm)
-                del clock[:]
-                for name, start_xy, goal_xy in moves:
-                    for _ in range(args.repeats):
-                        start_q = ros.go_to(start_xy)
-                        result = ros.move(goal_xy) if start_q is not None else \
-                            {'outcome': 'no start', 'sentence': '', 'ros_s': math.nan}
-                        result.update(name=name, goal_xy=goal_xy, start_q=start_q)
-                        rows.append(result)
-                        print(f'  {name}: {result["outcome"]}, {fmt(result["ros_s"])} s through '
-                              'ROS', file=sys.stderr, flush=True)
-                log_dir = rig.log_dir
-                if len(clock) > 1:      # in step with the controller: as fast as it answers
-                    (wall0, sim0), (wall1, sim1) = clock[0], clock[-1]
-                    args.clock_rate = (sim1 - sim0) / (wall1 - wall0)
-                    sim = rig.node_diagnostics('/sim')
-                    args.late_commands = sim[-1]['commands late for their period'] \
-                        if sim else '?'
-            finally:
-                rig.close()
-                probe.close()
-    finally:
-        busy.stop(loops)
+    with nodes('bench_ros', node_args, args.load, args.domain) as rig:
+        ros = RosMoves(rig, bool(args.sim_speed))
+        clock = []                              # (wall s, sim s) of each /clock
+        if args.sim_speed:
+            rig.probe.node.create_subscription(Clock, '/clock', lambda m: clock.append(
+                (time.monotonic(), m.clock.sec + 1e-9 * m.clock.nanosec)), 100)
+        rig.start_all()
+        rig.ready(90.0)
+        args.keeping = wait_for_presets_kept(rig, arm)
+        del clock[:]
+        for name, start_xy, goal_xy in moves:
+            for _ in range(args.repeats):
+                start_q = ros.go_to(start_xy)
+                result = ros.move(goal_xy) if start_q is not None else \
+                    {'outcome': 'no start', 'sentence': '', 'ros_s': math.nan}
+                result.update(name=name, goal_xy=goal_xy, start_q=start_q)
+                rows.append(result)
+                print(f'  {name}: {result["outcome"]}, {fmt(result["ros_s"])} s through ROS',
+                      file=sys.stderr, flush=True)
+        log_dir = rig.log_dir
+        if len(clock) > 1:      # in step with the controller: as fast as it answers
+            (wall0, sim0), (wall1, sim1) = clock[0], clock[-1]
+            args.clock_rate = (sim1 - sim0) / (wall1 - wall0)
+            sim = rig.node_diagnostics('/sim')
+            args.late_commands = sim[-1]['commands late for their period'] if sim else '?'
     # After the nodes: IPOPT's threads and this process's planning would disturb them.
     planner = Planner(arm, config.load('planner')[1])
     for row in rows:

@@ -23,29 +23,23 @@ the controller's worker: what the user waits for before the arm moves. And, on
 """
 
 import argparse
-from contextlib import nullcontext
 import math
 from pathlib import Path
 import random
 import sys
-import tempfile
 
 BENCH = Path(__file__).resolve().parent
 sys.path[:0] = [str(BENCH), str(BENCH.parent / 'test')]
 
 from arm_rig import ArmRig  # noqa: E402
-from bench_ros import breakdown_ms, RosMoves, wait_for_presets_kept  # noqa: E402
-import busy  # noqa: E402
+from bench_ros import breakdown_ms, nodes, RosMoves, wait_for_presets_kept  # noqa: E402
 import numpy as np  # noqa: E402
-from ros_harness import Probe, ros_domain  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.goals import GoalValidator  # noqa: E402
 from arm_control.model.kinematics import UnreachableError  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
 from arm_control.parameters import default_parameter_file  # noqa: E402
-
-LOAD_BUDGET_S = 3600.0
 
 
 def euler_circuit(names) -> list:
@@ -97,41 +91,27 @@ def run(args):
     arm, _ = config.load('controller', *files)
     forbidden = ForbiddenSpace(arm)
     node_args = {name: ('--params-file', files[0]) for name in ArmRig.NODES} if files else {}
-    loops = busy.start(2, LOAD_BUDGET_S) if args.load else []
     results = []
-    try:
-        with ros_domain() if args.domain is None else nullcontext(args.domain) as domain:
-            probe = Probe(domain, 'planning_ros')
-            rig = ArmRig(domain, probe, Path(tempfile.mkdtemp(prefix='arm_planning_ros_')),
-                         node_args)
-            ros = RosMoves(rig, simulated=False)
-            try:
-                rig.start_all()
-                rig.ready(90.0)
-                keeping = wait_for_presets_kept(rig, arm)
-                first = arm.presets[0]
-                ros.go_to(first[1:])
-                for kind, label, xy in goals(arm, args.points, args.laps, args.seed):
-                    result = ros.move(xy)
-                    parts = breakdown_ms(result['sentence'])
-                    q = result['q']
-                    inside = int(np.count_nonzero(~np.asarray(forbidden.is_free(q)))) \
-                        if len(q) else 0
-                    # A goal along a kept trajectory says 'kept trajectory' (its look-up).
-                    timing_ms = parts.get('timing', parts.get('kept trajectory', math.nan))
-                    planner_ms = parts.get('planner round trip', math.nan)
-                    results.append({'kind': kind, 'label': label, 'outcome': result['outcome'],
-                                    'planner_ms': planner_ms, 'timing_ms': timing_ms,
-                                    'wait_ms': planner_ms + timing_ms,
-                                    'forbidden samples': inside})
-                    print(f'  {kind} {label}: {result["outcome"]}, waited '
-                          f'{results[-1]["wait_ms"]:.1f} ms', file=sys.stderr, flush=True)
-                log_dir = rig.log_dir
-            finally:
-                rig.close()
-                probe.close()
-    finally:
-        busy.stop(loops)
+    with nodes('planning_ros', node_args, args.load, args.domain) as rig:
+        ros = RosMoves(rig, simulated=False)
+        rig.start_all()
+        rig.ready(90.0)
+        keeping = wait_for_presets_kept(rig, arm)
+        ros.go_to(arm.presets[0][1:])
+        for kind, label, xy in goals(arm, args.points, args.laps, args.seed):
+            result = ros.move(xy)
+            parts = breakdown_ms(result['sentence'])
+            q = result['q']
+            inside = int(np.count_nonzero(~np.asarray(forbidden.is_free(q)))) if len(q) else 0
+            # A goal along a kept trajectory says 'kept trajectory' (its look-up).
+            timing_ms = parts.get('timing', parts.get('kept trajectory', math.nan))
+            planner_ms = parts.get('planner round trip', math.nan)
+            results.append({'kind': kind, 'label': label, 'outcome': result['outcome'],
+                            'planner_ms': planner_ms, 'timing_ms': timing_ms,
+                            'wait_ms': planner_ms + timing_ms, 'forbidden samples': inside})
+            print(f'  {kind} {label}: {result["outcome"]}, waited '
+                  f'{results[-1]["wait_ms"]:.1f} ms', file=sys.stderr, flush=True)
+        log_dir = rig.log_dir
     print_table(args, results, keeping, log_dir)
     return results
 
