@@ -325,10 +325,10 @@ class ControllerConfig:
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    """The configuration-space grid, and the priority of an answer."""
+    """The configuration-space grid, and the planner's priority once prepared."""
 
     grid_resolution_rad: float
-    realtime_priority: int = 0      # SCHED_FIFO priority while answering plan_path; 0: normal
+    realtime_priority: int = 0      # SCHED_FIFO priority once prepared; 0: normal
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'PlannerConfig':
