@@ -325,6 +325,22 @@ def test_cancel_brakes_along_the_path_and_holds(arm, controller_config, planner)
     assert rig.lowest_m == 0.0
 
 
+def test_a_goal_sent_while_a_cancel_brakes_the_arm_is_reached(arm, controller_config, planner):
+    """No trajectory may start from the braking arm (here it would need 0.07 V beyond the
+    braking limit): the goal is then planned from where the arm comes to rest, not failed.
+    Seen through ROS at the end of the flood test."""
+    rig = Rig(arm, controller_config, planner, seed=7)
+    rig.core.submit_preset(rig.now, 'back_score')
+    rig.run(0.6)
+    rig.core.cancel(rig.now)
+    rig.step()
+    rig.core.submit_preset(rig.now, 'floor_pickup')
+    assert rig.run(4.0, lambda: rig.core.state == ArmState.HOLDING), kinds(rig.core)
+    assert Kind.GOAL_FAILED not in kinds(rig.core)
+    assert rig.kinematics.forward(rig.true_q) == pytest.approx((1.2, 0.15), abs=0.03)
+    assert rig.lowest_m == 0.0
+
+
 @pytest.mark.parametrize('start_xy, goal_xy', [((0.676, 0.148), (0.013, 0.589)),
                                                ((0.601, 0.24), (-0.036, 0.59)),
                                                ((-0.4, 0.3), (0.25, 0.45))])

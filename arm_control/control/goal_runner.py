@@ -17,7 +17,7 @@ import numpy as np
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.events import EventKind as Kind, EventLog, quote
 from arm_control.control.goals import Goal, GoalQueue, GoalValidator
-from arm_control.control.motions import Motion, Setpoints, StraightStop
+from arm_control.control.motions import Motion, Setpoints, StoppingMotion, StraightStop
 from arm_control.control.plans import PlanHandoff, PlanRequest, TimedPlan
 from arm_control.control.state_machine import ArmState as S, StateMachine, Trigger as T
 
@@ -150,10 +150,11 @@ class GoalRunner:
         verdict, value = self.plans.answer(now_s, timed, -math.inf if last is None
                                            else last.end_s)
         if verdict == 'fail' and timed.request.start_time_s is not None \
-                and isinstance(last, StraightStop) and not last.finished(now_s):
-            # Braking to rest (off its plan, back from a stall, out of driver mode): none
-            # from the moving arm, so one from where it comes to rest.
-            self.ask(now_s, timed.request.goal, rest_q, last.end_s - now_s + 1e-6)
+                and isinstance(last, (StraightStop, StoppingMotion)):
+            # Braking to rest (cancelled, off its plan, back from a stall, out of driver
+            # mode), or at rest since: none from the moving arm, so one from where it comes
+            # to rest. A goal sent just after a cancel had failed from the braking arm.
+            self.ask(now_s, timed.request.goal, rest_q, max(last.end_s - now_s, 0.0) + 1e-6)
         elif verdict == 'fail':
             self.fail(now_s, value)
         elif verdict == 'retry':
