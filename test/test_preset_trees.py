@@ -72,3 +72,25 @@ def test_a_tree_meeting_a_blocked_edge_is_built_again_and_stays_exact():
         assert cost == pytest.approx(true_cost[1], rel=1e-9)
         assert forbidden.path_is_free(lazy.configurations[nodes], 0.01)
     assert lazy.blocked_edges > 0
+
+
+def test_a_plan_from_a_preset_read_backwards_off_its_tree_is_as_short_as_a_search(frc_planners):
+    """The graph is symmetric: from a preset's branch, the tree toward it gives the shortest
+    paths out of it as well."""
+    searching, prepared, presets = frc_planners
+    forbidden = searching.forbidden
+    rng = np.random.default_rng(5)
+    goals = rng.uniform(forbidden.limits[:, 0], forbidden.limits[:, 1], (400, 2))
+    goals = goals[forbidden.is_free(goals)][:12]
+    read_backwards = 0
+    for start in presets:
+        for found, read in zip(searching.plan_to_configurations(start, goals),
+                               prepared.plan_to_configurations(start, goals)):
+            assert found.ok == read.ok, (found.reason, read.reason)
+            if not found.ok:
+                continue
+            read_backwards += len(read.waypoints_rad) > 2
+            assert read.cost_rad == pytest.approx(found.cost_rad, abs=1e-9)
+            np.testing.assert_allclose(read.waypoints_rad[[0, -1]], found.waypoints_rad[[0, -1]])
+            assert forbidden.path_is_free(read.waypoints_rad, CHECK_STEP_RAD)
+    assert read_backwards > 0                    # not every goal in straight sight

@@ -38,6 +38,9 @@ MAX_CANDIDATES = 24
 SEARCH_GUESS_FACTOR = 1.5
 SEARCH_GUESS_MARGIN_RAD = math.radians(30.0)
 BRANCH_NAMES = ('elbow-positive', 'elbow-negative')
+# A start within this of a tree's goal on both joints (a robot resting on a preset, its pose
+# sent as a tool pose and back) plans from that tree.
+TREE_START_RAD = 1e-6
 
 
 @dataclass(frozen=True, eq=False)
@@ -303,6 +306,17 @@ class Planner:
                 found = self.trees.path(goals[g], source_nodes, source_costs)
                 if found is not None:
                     plans[g] = self._finish(start, goals[g], found[0], escape)
+            open_groups = [g for g in open_groups if plans[g] is None]
+            if not open_groups:
+                return plans
+        root = self.trees.rooted_at(start, TREE_START_RAD) if escape is None else None
+        if root is not None:                        # nor does a start with one, read backwards
+            for g in open_groups:
+                ways = [(found[1], k, found[0]) for k in groups[g]
+                        for found in [self.trees.path_from(root, *links[k])] if found]
+                if ways:
+                    _, k, nodes = min(ways, key=lambda way: way[0])
+                    plans[g] = self._finish(start, goals[k], nodes, escape)
             open_groups = [g for g in open_groups if plans[g] is None]
             if not open_groups:
                 return plans

@@ -6,7 +6,9 @@ The grid's graph is symmetric (an edge is cut both ways when its check fails), s
 from a goal's grid links gives every node's distance *to* the goal, and its predecessors lead
 toward it. A path read off a tree has its edges checked like any other: a blocked one is cut
 and the tree built again. The tree's distances can only be optimistic, so a path whose edges
-are all free is a shortest one, as with the lazy edge checks of a search.
+are all free is a shortest one, as with the lazy edge checks of a search. Read backwards, a
+tree also gives the shortest paths *from* its goal: a robot resting on a preset needs no
+search to go anywhere.
 """
 
 import numpy as np
@@ -40,6 +42,21 @@ class GoalTrees:
             return
         distance, predecessor = self.grid.shortest_paths(nodes, costs)
         self._trees[goal_key(goal)] = (distance, predecessor.astype(np.int32), links)
+
+    def rooted_at(self, q, tolerance_rad: float):
+        """The goal of a tree within ``tolerance_rad`` of q on both joints, or None."""
+        q = np.asarray(q, float)
+        for key in self._trees:
+            if np.max(np.abs(np.array(key) - q)) <= tolerance_rad:
+                return np.array(key)
+        return None
+
+    def path_from(self, root, target_nodes, target_costs):
+        """(nodes from the tree's goal ``root`` to the cheapest of ``target_nodes`` (joined
+        at ``target_costs``), cost): the tree's path from there, reversed -- the graph is
+        symmetric -- or None without a way."""
+        found = self.path(root, target_nodes, target_costs)
+        return None if found is None else (found[0][::-1], found[1])
 
     def path(self, goal, source_nodes, source_costs):
         """(nodes from a source node to one of the goal's links, cost) read off the goal's
