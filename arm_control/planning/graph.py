@@ -63,17 +63,19 @@ class Axis:
         return (angle_rad - self.first_rad) / self.step_rad
 
 
-def segment_samples(q_from, q_to, step_rad: float) -> np.ndarray:
+def segment_samples(q_from, q_to, step_rad: float) -> tuple[np.ndarray, np.ndarray]:
     """The points ``ForbiddenSpace.segment_is_free`` checks, for many segments at once.
 
-    q_from, q_to: (E, 2). Returns (E, S, 2), each segment's samples padded with its end.
+    q_from, q_to: (E, 2). Returns (samples (S, 2), the index in them of each segment's
+    first): each segment's own samples, one after another.
     """
     q_from, q_to = np.asarray(q_from, float), np.asarray(q_to, float)
     delta = q_to - q_from
     counts = np.maximum(2, np.ceil(np.max(np.abs(delta), axis=-1) / step_rad).astype(int) + 1)
-    k = np.minimum(np.arange(counts.max())[None, :], counts[:, None] - 1)
-    fraction = k * (1.0 / (counts[:, None] - 1))
-    return q_from[:, None, :] + fraction[..., None] * delta[:, None, :]
+    firsts = np.cumsum(counts) - counts
+    segment = np.repeat(np.arange(len(counts)), counts)
+    fraction = (np.arange(counts.sum()) - firsts[segment]) * (1.0 / (counts[segment] - 1))
+    return q_from[segment] + fraction[:, None] * delta[segment], firsts
 
 
 def segments_free(forbidden: ForbiddenSpace, q_from, q_to, step_rad: float) -> np.ndarray:
@@ -88,8 +90,8 @@ def segments_free(forbidden: ForbiddenSpace, q_from, q_to, step_rad: float) -> n
     chunk = max(1, CHECK_BATCH // per_segment)
     for begin in range(0, len(q_from), chunk):
         end = begin + chunk
-        samples = segment_samples(q_from[begin:end], q_to[begin:end], step_rad)
-        free[begin:end] = np.all(forbidden.is_free(samples), axis=-1)
+        samples, firsts = segment_samples(q_from[begin:end], q_to[begin:end], step_rad)
+        free[begin:end] = np.logical_and.reduceat(forbidden.is_free(samples), firsts)
     return free
 
 
