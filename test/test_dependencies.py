@@ -34,6 +34,7 @@ MODULE_KEYS = {
     'visualization_msgs': 'visualization_msgs',
     'numpy': 'python3-numpy',
     'scipy': 'python3-scipy',
+    'numba': 'python3-numba',
     'yaml': 'python3-yaml',
     'matplotlib': 'python3-matplotlib',
     'tkinter': 'python3-tk',                  # in the standard library, but Debian splits it

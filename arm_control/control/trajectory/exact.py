@@ -1,11 +1,12 @@
 """The exact time-optimal timing of paths that start from rest (or a given path speed) and
 end at rest, back-EMF kept exactly: the closed-form backward and forward passes of the
 classical time-optimal parameterisation on a grid, for many paths at once (the shape search)
-or one (plain floats: several times faster than numpy for a single path).
+or one (its passes compiled with numba).
 """
 
 import math
 
+import numba
 import numpy as np
 
 
@@ -61,7 +62,7 @@ def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
         end_beta = -stage * sign[1:] * D[1:]
         end_beta_squared = end_beta ** 2
         end_gamma = stage * (W - sign[1:] * C[1:])
-        if count == 1:      # one path: plain floats are several times faster than numpy
+        if count == 1:      # one path: the compiled passes
             slope_x = -sign * B * inverse         # the s̈ bound: slope_x·x + slope_y·y + ...
             slope_y = -sign * D * inverse
             brake = np.where(size > 1e-12, -(W + sign * C) * inverse, -np.inf)
@@ -70,8 +71,9 @@ def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
                                  start_gamma, size[:-1]], axis=-1)[:, 0]
             forward = np.stack([slope_x[:-1], slope_y[:-1], push[:-1], end_alpha, end_beta,
                                 end_gamma, size[1:]], axis=-1)[:, 0]
-            speed, ceiling = _passes_one_path(backward.tolist(), forward.tolist(),
-                                              top[:, 0].tolist(), twice.tolist(),
+            speed, ceiling = _passes_one_path(np.ascontiguousarray(backward),
+                                              np.ascontiguousarray(forward),
+                                              np.ascontiguousarray(top[:, 0]), twice,
                                               float(start_speed))
             return np.where(start_speed > ceiling[0] * (1.0 + 1e-9) + 1e-12, np.nan,
                             np.array(speed))[None]
@@ -131,7 +133,7 @@ class OnePath:
                       left * D[:, j] - right * D[:, m], left * C[:, j] - right * C[:, m])
         twice = 2.0 * np.asarray(steps, float)
         self.stage = twice[:, None]
-        self.twice = twice.tolist()
+        self.twice = twice
         inverse = self.inverse
         slope_x, slope_y = -sign * B * inverse, -sign * D * inverse
         # Per stage and row, as ``fastest_speeds``: slopes, constant (set per sag), α, β,
@@ -163,61 +165,65 @@ class OnePath:
         self.backward[..., 5] = self.stage * low[:-1]
         self.forward[..., 2] = np.where(self.bounded, high * self.inverse, np.inf)[:-1]
         self.forward[..., 5] = self.stage * high[1:]
-        speed, ceiling = _passes_one_path(self.backward.tolist(), self.forward.tolist(),
-                                          top.tolist(), self.twice, float(start_speed))
+        speed, ceiling = _passes_one_path(self.backward, self.forward, top, self.twice,
+                                          float(start_speed))
         if start_speed > ceiling[0] * (1.0 + 1e-9) + 1e-12:
             return np.full(len(speed), np.nan)
         return np.array(speed)
 
 
+@numba.njit(cache=True)
 def _passes_one_path(backward, forward, top, twice, start_speed):
-    """``fastest_speeds``' backward and forward passes for one path, on floats. Per stage and
-    row: the s̈ bound's slopes in x and y and its constant (braking at the stage's end for
-    the backward pass, driving at its start for the forward one), then α, β, γ and |A| of
-    the quadratic that bounds the speed at the stage's other end."""
+    """``fastest_speeds``' backward and forward passes for one path (compiled: a scalar
+    recursion, stage after stage, that numpy cannot vectorise). Per stage and row: the s̈
+    bound's slopes in x and y and its constant (braking at the stage's end for the backward
+    pass, driving at its start for the forward one), then α, β, γ and |A| of the quadratic
+    that bounds the speed at the stage's other end."""
     stages = len(top)
-    sqrt, inf = math.sqrt, math.inf
-    ceiling = [0.0] * stages
+    inf = math.inf
+    ceiling = np.zeros(stages)
     for i in range(stages - 2, -1, -1):
         y = ceiling[i + 1]
         x = y * y
         bound = top[i]
         brake = -inf
-        for slope_x, slope_y, constant, alpha, beta, gamma, size in backward[i]:
+        for r in range(backward.shape[1]):
+            slope_x, slope_y, constant, alpha, beta, gamma, size = backward[i, r]
             value = slope_x * x + slope_y * y + constant
             if value > brake:
                 brake = value
             gamma += size * x
             discriminant = beta * beta - 4.0 * alpha * gamma
             if discriminant >= 0.0:
-                denominator = sqrt(discriminant) - beta
+                denominator = math.sqrt(discriminant) - beta
                 if denominator > 0.0 and 2.0 * gamma < bound * denominator:
                     bound = 2.0 * gamma / denominator
         slowest = x - twice[i] * brake
-        slowest = sqrt(slowest) if slowest > 0.0 else 0.0
+        slowest = math.sqrt(slowest) if slowest > 0.0 else 0.0
         ceiling[i] = bound if bound < slowest else slowest
-    speed = [0.0] * stages
+    speed = np.zeros(stages)
     speed[0] = start_speed
     for i in range(stages - 1):
         y = speed[i]
         x = y * y
         push = inf
         reach = ceiling[i + 1]
-        for slope_x, slope_y, constant, alpha, beta, gamma, size in forward[i]:
+        for r in range(forward.shape[1]):
+            slope_x, slope_y, constant, alpha, beta, gamma, size = forward[i, r]
             value = slope_x * x + slope_y * y + constant
             if value < push:
                 push = value
             gamma += size * x
             discriminant = beta * beta - 4.0 * alpha * gamma
             if discriminant >= 0.0:
-                denominator = sqrt(discriminant) - beta
+                denominator = math.sqrt(discriminant) - beta
                 if denominator > 0.0 and 2.0 * gamma < reach * denominator:
                     reach = 2.0 * gamma / denominator
         fastest = x + twice[i] * push
         top_next = ceiling[i + 1] * ceiling[i + 1]
         if fastest > top_next:
             fastest = top_next
-        fastest = sqrt(fastest) if fastest > 0.0 else 0.0
+        fastest = math.sqrt(fastest) if fastest > 0.0 else 0.0
         speed[i + 1] = fastest if fastest < reach else reach
     return speed, ceiling
 
