@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from arm_control import config
-from arm_control.model.world import ForbiddenSpace, free_cells
+from arm_control.model.world import ForbiddenSpace, free_cells, FreeCells
 
 FRC_ROBOT = str(Path(__file__).resolve().parents[1] / 'config' / 'frc_robot.yaml')
 
@@ -70,3 +70,21 @@ def test_clear_checks_through_the_cells_give_the_sampled_answer(arm):
     sampled = np.all(plain.within_limits(q[:, None] + square)
                      & ~plain.collides(q[:, None] + square), axis=-1)
     np.testing.assert_array_equal(space.is_free(q), sampled)
+
+
+def test_cells_proved_ahead_a_few_tiles_at_a_time_are_those_the_checks_would_prove(arm):
+    """Proving every cell ahead (as the planner does while idle, in slices) leaves the same
+    verdicts as proving each where a check first meets it."""
+    margin = arm.world.clearance_rad
+    ahead = [FreeCells(arm), FreeCells(arm, margin)]
+    ahead[1].base = ahead[0]
+    slices = 0
+    while not all(cells.prove_some(40) for cells in ahead):
+        slices += 1
+    assert slices > 1 and all(cells.tiles_done.all() for cells in ahead)
+    rng = np.random.default_rng(15)
+    space = ForbiddenSpace(arm)
+    q = rng.uniform(space.limits[:, 0], space.limits[:, 1], (20_000, 2))
+    for proved, met in zip(ahead, (free_cells(arm), free_cells(arm, margin))):
+        for a, b in zip(proved.lookup(q), met.lookup(q)):
+            np.testing.assert_array_equal(a, b)

@@ -93,6 +93,13 @@ class FreeCells:
         return (inside & self.free[index[:, 0], index[:, 1]],
                 inside & self.forbidden[index[:, 0], index[:, 1]])
 
+    def prove_some(self, tiles: int | None = None) -> bool:
+        """Prove ``tiles`` more tiles (None: all) ahead of the checks; True once all are."""
+        left = np.argwhere(~self.tiles_done)
+        if len(left):
+            self._prove(left[:tiles])
+        return tiles is None or len(left) <= tiles
+
     def block(self, low, high) -> np.ndarray:
         """The cells [low, high) on each axis, proved where not yet; outside the joints'
         travel none is free."""
@@ -264,6 +271,16 @@ class ForbiddenSpace:
                 free[rest] = self.within_limits(others) & ~self.collides(others)
         free = free.reshape(q.shape[:-1])
         return bool(free) if free.ndim == 0 else free
+
+    def prove_cells(self, tiles: int | None = None) -> bool:
+        """Prove the cells this space's checks look up (free space's; with a margin, the
+        clear ones too), ``tiles`` more at a time (None: all), ahead of the checks: each check
+        proves those it meets, and a goal into joint space no check had been to cost the
+        quick timing 2-3 times as much. True once all are."""
+        levels = [free_cells(self.arm)]
+        if self.margin_rad > 0.0:
+            levels.append(free_cells(self.arm, self.margin_rad))
+        return all(cells.prove_some(tiles) for cells in levels)
 
     def why_forbidden(self, q) -> str | None:
         """A sentence saying why q is forbidden, or None when it is free."""

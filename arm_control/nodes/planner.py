@@ -13,7 +13,9 @@ Publishes ``planned_path`` (Path, latched: the last successful plan), ``cspace_m
 it builds the shortest-path trees toward every preset's elbow branches (``Planner.prepare``),
 so that plans to a preset need no search; then, in the next few, the answers from each
 preset's branches to every other preset (``PresetAnswers``), so that a goal from one preset
-to another is answered at once.
+to another is answered at once; then it proves every cell of joint space its checks look up
+(``Planner.prove_cells``), so that a goal into a part no check had been to does not pay for
+them.
 
 ``cspace_map`` is the configuration space as a map in frame ``cspace`` (set RViz's fixed
 frame to it): cell (i, j) = (shoulder cell i, elbow cell j), so x is the shoulder angle and
@@ -45,6 +47,7 @@ from arm_control.planning.planner import Planner, poses_from_waypoints
 CSPACE_FRAME = 'cspace'
 POSE_TOLERANCE_M = 0.001          # a start pose must be a pose of this arm within this
 PREPARE_PERIOD_S = 0.05           # one preset branch's shortest-path tree per this, at start
+PROVE_TILES = 256                 # then this many tiles of forbidden-space cells (30 ms)
 
 
 class RequestError(ValueError):
@@ -93,8 +96,10 @@ class PlannerNode(Node):
         self.create_service(GetPlan, 'plan_path', self.on_plan_path)
         self.create_timer(1.0, self.publish_diagnostics)
         # While idle after start-up, one preset branch's tree per tick (Planner.prepare),
-        # then one answer between presets (PresetAnswers).
+        # then one answer between presets (PresetAnswers), then PROVE_TILES of the cells the
+        # checks look up (Planner.prove_cells).
         self.to_prepare = self.ranking.preset_configurations()
+        self.cells_proved = False
         self.prepare_timer = self.create_timer(PREPARE_PERIOD_S, self.prepare_next)
         self.map_pub.publish(self.cspace_map())
         grid = self.planner.grid
@@ -108,18 +113,21 @@ class PlannerNode(Node):
         due timer before a waiting request, so work done back to back (a loaded machine,
         where one takes longer than the period) would keep plan_path waiting until the end."""
         self.destroy_timer(self.prepare_timer)
-        if not self.to_prepare and not self.preset_answers.pending:
+        if not self.to_prepare and not self.preset_answers.pending and self.cells_proved:
             self.answer_at_real_time()
             return
         began = time.monotonic()
         try:
             if self.to_prepare:
                 self.planner.prepare(self.to_prepare.pop(0))
-            else:
+            elif self.preset_answers.pending:
                 self.preset_answers.prepare_next()
+            else:
+                self.cells_proved = self.planner.prove_cells(PROVE_TILES)
         except Exception as error:                  # a failed table is no reason to stop
             self.get_logger().error(f'preparing the preset paths failed: {error!r}')
             self.to_prepare, self.preset_answers.pending = [], []
+            self.cells_proved = True
         pause_s = max(PREPARE_PERIOD_S, 2.0 * (time.monotonic() - began))
         self.prepare_timer = self.create_timer(pause_s, self.prepare_next)
 

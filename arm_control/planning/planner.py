@@ -205,6 +205,11 @@ class Planner:
         self.trees.build(goal, self.grid.connections(goal, toward=True))
         return True
 
+    def prove_cells(self, tiles: int | None = None) -> bool:
+        """``ForbiddenSpace.prove_cells`` for the space plans are checked in (the clearance's
+        too): ``tiles`` more at a time (None: all); True once all are."""
+        return (self.clear or self).forbidden.prove_cells(tiles)
+
     # Ends
 
     def _in_travel(self, q) -> np.ndarray:
