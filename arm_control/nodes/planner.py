@@ -47,6 +47,7 @@ from arm_control.planning.planner import Planner, poses_from_waypoints
 CSPACE_FRAME = 'cspace'
 POSE_TOLERANCE_M = 0.001          # a start pose must be a pose of this arm within this
 PREPARE_PERIOD_S = 0.05           # one preset branch's shortest-path tree per this, at start
+PREPARING = 'normal (preparing)'
 PROVE_TILES = 256                 # then this many tiles of forbidden-space cells (30 ms)
 
 
@@ -88,7 +89,7 @@ class PlannerNode(Node):
         self.last_message = 'no request yet'
         self.last_ok = True
         self.last_latency_s = math.nan
-        self.scheduling = 'normal (preparing)'   # or why real-time priority was refused
+        self.scheduling = PREPARING          # or why real-time priority was refused
 
         self.path_pub = self.create_publisher(Path, 'planned_path', LATCHED)
         self.map_pub = self.create_publisher(OccupancyGrid, 'cspace_map', LATCHED)
@@ -109,12 +110,15 @@ class PlannerNode(Node):
             f'{len(self.arm.world.regions)} forbidden regions; built in {self.build_s:.2f} s')
 
     def prepare_next(self) -> None:
-        """One tree or one answer, then a pause of twice what it took: the executor takes a
-        due timer before a waiting request, so work done back to back (a loaded machine,
-        where one takes longer than the period) would keep plan_path waiting until the end."""
+        """One tree, one answer or one slice of cells, then a pause of twice what it took: the
+        executor takes a due timer before a waiting request, so work done back to back (a
+        loaded machine, where one takes longer than the period) would keep plan_path waiting
+        until the end."""
         self.destroy_timer(self.prepare_timer)
-        if not self.to_prepare and not self.preset_answers.pending and self.cells_proved:
-            self.answer_at_real_time()
+        prepared = not self.to_prepare and not self.preset_answers.pending
+        if prepared and self.scheduling == PREPARING:
+            self.answer_at_real_time()              # the cells are proved at that priority
+        if prepared and self.cells_proved:
             return
         began = time.monotonic()
         try:
