@@ -43,67 +43,26 @@ def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
         left * B[..., j] - right * B[..., m], left * D[..., j] - right * D[..., m],
         W[j] * size[..., m] + W[m] * size[..., j] + left * C[..., j] - right * C[..., m]),
         axis=-1))
-    count, stages = A.shape[0], A.shape[1]
     twice = 2.0 * np.asarray(steps, float)                        # 2Δ per stage
-    # Stage-major copies (n, K, rows): each step below reads contiguous memory.
-    A, B, C, D, sign, size = (np.ascontiguousarray(np.moveaxis(v, 1, 0))
-                              for v in (A, B, C, D, sign, size))
-    top = np.ascontiguousarray(top.T)
+    stage = twice[None, :, None]
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-        inverse = np.where(size > 1e-12, 1.0 / size, 0.0)
-        unbounded = np.where(size > 1e-12, 0.0, np.inf)
+        bounded = size > 1e-12
+        inverse = np.where(bounded, 1.0 / size, 0.0)
+        slope_x = -sign * B * inverse         # the s̈ bound: slope_x·x + slope_y·y + ...
+        slope_y = -sign * D * inverse
+        brake = np.where(bounded, -(W + sign * C) * inverse, -np.inf)
+        push = np.where(bounded, (W - sign * C) * inverse, np.inf)
         # Stage i's u at its start (x_i) and at its end (x_i+1 = x_i + 2Δu): y² − x_i = 2Δu.
-        stage = twice[:, None, None]
-        start_alpha = stage * sign[:-1] * B[:-1] - size[:-1]
-        start_beta = stage * sign[:-1] * D[:-1]
-        start_beta_squared = start_beta ** 2
-        start_gamma = stage * (W + sign[:-1] * C[:-1])
-        end_alpha = -(size[1:] + stage * sign[1:] * B[1:])
-        end_beta = -stage * sign[1:] * D[1:]
-        end_beta_squared = end_beta ** 2
-        end_gamma = stage * (W - sign[1:] * C[1:])
-        if count == 1:      # one path: the compiled passes
-            slope_x = -sign * B * inverse         # the s̈ bound: slope_x·x + slope_y·y + ...
-            slope_y = -sign * D * inverse
-            brake = np.where(size > 1e-12, -(W + sign * C) * inverse, -np.inf)
-            push = np.where(size > 1e-12, (W - sign * C) * inverse, np.inf)
-            backward = np.stack([slope_x[1:], slope_y[1:], brake[1:], start_alpha, start_beta,
-                                 start_gamma, size[:-1]], axis=-1)[:, 0]
-            forward = np.stack([slope_x[:-1], slope_y[:-1], push[:-1], end_alpha, end_beta,
-                                end_gamma, size[1:]], axis=-1)[:, 0]
-            speed, ceiling = _passes_one_path(np.ascontiguousarray(backward),
-                                              np.ascontiguousarray(forward),
-                                              np.ascontiguousarray(top[:, 0]), twice,
-                                              float(start_speed))
-            return np.where(start_speed > ceiling[0] * (1.0 + 1e-9) + 1e-12, np.nan,
-                            np.array(speed))[None]
-        ceiling = np.zeros((stages, count))
-        for i in range(stages - 2, -1, -1):
-            y = ceiling[i + 1]
-            column = y[:, None]
-            r = (B[i + 1] * column + D[i + 1]) * column + C[i + 1]
-            brake = np.max(-(W + sign[i + 1] * r) * inverse[i + 1] - unbounded[i + 1], axis=1)
-            gamma = start_gamma[i] + size[i] * (y * y)[:, None]
-            denominator = np.sqrt(start_beta_squared[i] - 4.0 * start_alpha[i] * gamma) \
-                - start_beta[i]
-            root = np.min(np.where(denominator > 0.0, 2.0 * gamma / denominator, np.inf), axis=1)
-            ceiling[i] = np.minimum(np.minimum(top[i], root),
-                                    np.sqrt(np.maximum(y * y - twice[i] * brake, 0.0)))
-        speed = np.zeros((stages, count))
-        speed[0] = start_speed
-        for i in range(stages - 1):
-            y = speed[i]
-            column = y[:, None]
-            r = (B[i] * column + D[i]) * column + C[i]
-            push = np.min((W - sign[i] * r) * inverse[i] + unbounded[i], axis=1)
-            gamma = end_gamma[i] + size[i + 1] * (y * y)[:, None]
-            denominator = np.sqrt(end_beta_squared[i] - 4.0 * end_alpha[i] * gamma) \
-                - end_beta[i]
-            at_end = np.min(np.where(denominator > 0.0, 2.0 * gamma / denominator, np.inf),
-                            axis=1)
-            speed[i + 1] = np.minimum(np.sqrt(np.clip(np.minimum(
-                y * y + twice[i] * push, ceiling[i + 1] ** 2), 0.0, None)), at_end)
-    speed, ceiling = speed.T.copy(), ceiling.T
+        backward = np.stack([slope_x[:, 1:], slope_y[:, 1:], brake[:, 1:],
+                             stage * sign[:, :-1] * B[:, :-1] - size[:, :-1],
+                             stage * sign[:, :-1] * D[:, :-1],
+                             stage * (W + sign[:, :-1] * C[:, :-1]), size[:, :-1]], axis=-1)
+        forward = np.stack([slope_x[:, :-1], slope_y[:, :-1], push[:, :-1],
+                            -(size[:, 1:] + stage * sign[:, 1:] * B[:, 1:]),
+                            -stage * sign[:, 1:] * D[:, 1:],
+                            stage * (W - sign[:, 1:] * C[:, 1:]), size[:, 1:]], axis=-1)
+    speed, ceiling = _passes(backward, forward, np.ascontiguousarray(top), twice,
+                             float(start_speed))
     speed[start_speed > ceiling[:, 0] * (1.0 + 1e-9) + 1e-12] = np.nan
     return speed
 
@@ -170,6 +129,16 @@ class OnePath:
         if start_speed > ceiling[0] * (1.0 + 1e-9) + 1e-12:
             return np.full(len(speed), np.nan)
         return np.array(speed)
+
+
+@numba.njit(cache=True)
+def _passes(backward, forward, top, twice, start_speed):
+    """``_passes_one_path`` for each of K paths: (speeds, ceilings), each (K, n)."""
+    speed, ceiling = np.empty(top.shape), np.empty(top.shape)
+    for k in range(top.shape[0]):
+        speed[k], ceiling[k] = _passes_one_path(backward[k], forward[k], top[k], twice,
+                                                start_speed)
+    return speed, ceiling
 
 
 @numba.njit(cache=True)
