@@ -79,8 +79,9 @@ class PlannerNode(Node):
         params = declare_parameters(self, 'planner')
         self.arm = ArmConfig.from_parameters(params)
         self.config = PlannerConfig.from_parameters(params)
-        began = self.started_s = time.monotonic()
+        self.started_s = time.monotonic()
         compile_passes()                    # the branch choice's timing, before a request can
+        began = time.monotonic()
         self.planner = Planner(self.arm, self.config)
         self.last_plan = None                # ((start, goal), plan): the last answer
         self.ranking = BranchRanking(self.arm)
@@ -134,9 +135,11 @@ class PlannerNode(Node):
             else:
                 self.cells_proved = self.planner.prove_cells(PROVE_TILES)
         except Exception as error:                  # a failed table is no reason to stop
-            self.get_logger().error(f'preparing the preset paths failed: {error!r}')
-            self.to_prepare, self.preset_answers.pending = [], []
-            self.cells_proved = True
+            self.get_logger().error(f'preparing the preset paths failed: {error!r}; '
+                                    'answering without the rest of them')
+            if self.scheduling == PREPARING:
+                self.answer_at_real_time()
+            return
         pause_s = max(PREPARE_PERIOD_S, 2.0 * (time.monotonic() - began))
         self.prepare_timer = self.create_timer(pause_s, self.prepare_next)
 
