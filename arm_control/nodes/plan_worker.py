@@ -41,7 +41,7 @@ import numpy as np
 from arm_control.config import ArmConfig
 from arm_control.control.goals import Goal
 from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
-from arm_control.control.trajectory.exact import compile_passes
+from arm_control.control.trajectory.bus import compile_kernels
 from arm_control.control.trajectory.moving_start import toppra_solver
 from arm_control.nodes.realtime import raised
 
@@ -353,7 +353,7 @@ def _warm_up(timer: PlanTimer, clock: HandoverClock) -> None:
     """Prove every forbidden-space cell the checks look up, then answer a move between the
     first two presets and throw the answers away: the first goal then finds the caches warm
     (the cells, numpy's and numba's first calls) and the hand-over clock set."""
-    compile_passes()
+    compile_kernels()
     timer.clear_space.prove_cells()        # a quarter of a second, not 2-3x on each new goal
     presets = timer.arm.presets
     if len(presets) < 2:

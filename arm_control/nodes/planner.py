@@ -40,7 +40,7 @@ from arm_control.config import ArmConfig, FRAME_ID, PlannerConfig
 from arm_control.control.events import quote
 from arm_control.control.goals import PLANE_TOLERANCE_M
 from arm_control.control.plans import BranchRanking, PresetAnswers
-from arm_control.control.trajectory.exact import compile_passes
+from arm_control.control.trajectory.bus import compile_kernels
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import declare_parameters, LATCHED, run, status
 from arm_control.planning.planner import Planner, poses_from_waypoints
@@ -80,7 +80,7 @@ class PlannerNode(Node):
         self.arm = ArmConfig.from_parameters(params)
         self.config = PlannerConfig.from_parameters(params)
         self.started_s = time.monotonic()
-        compile_passes()                    # the branch choice's timing, before a request can
+        compile_kernels()                   # the branch choice's timing, before a request can
         began = time.monotonic()
         self.planner = Planner(self.arm, self.config)
         self.last_plan = None                # ((start, goal), plan): the last answer

@@ -11,13 +11,15 @@ the brownout voltage (plus a margin) while the voltages stay within it
 
 import math
 
+import numba
 import numpy as np
 
-from arm_control.control.trajectory.exact import OnePath
+from arm_control.control.trajectory.exact import compile_passes, OnePath
 from arm_control.control.trajectory.limits import TrajectoryLimits, window
 from arm_control.control.trajectory.path import clustered
 from arm_control.control.trajectory.rows import (LEAST_HALF_WIDTH_V, PathTerms, rows,
                                                  speed_caps)
+from arm_control.model.dynamics import COULOMB_SMOOTHING_RAD_S
 
 BUS_ITERATIONS = 16
 # The bus is found on this many stages first, then only raised where it falls short, in at
@@ -36,6 +38,16 @@ RELAX = 0.5
 QUICK_AFTER_FIT = 2
 
 
+def compile_kernels() -> None:
+    """Compile the timing's kernels now (the exact passes and ``_judge``), or load them from
+    numba's cache beside these modules: seconds in the first process after an install, a
+    tenth of a second after that. A node does it before it serves, so that no goal waits
+    for it."""
+    compile_passes()
+    two, pair = np.ones(2), np.ones((2, 2))
+    _judge(two, two, two, np.ones(1), np.ones(12), *[pair] * 8)
+
+
 class BusSag:
     """The sag per grid point that one path's timing assumes, corrected toward its own.
 
@@ -44,7 +56,7 @@ class BusSag:
     the upper root of V_bus² − V_nominal·V_bus + R_battery·P = 0; the lower of the two)
     less the reserves. Where they do not, the sag is raised to the one at which the joints
     at their voltage's edge would fit their own bus exactly, at the timing's speeds
-    (``_edge_bus``: a Newton-like step, since the volts follow the bus there); where the
+    (a Newton-like step, since the volts follow the bus there); where the
     bus would fall below the floor (the volts went past it), halfway down to the lowest bus
     the rows allow. Where it fits with the voltage at its edge, the sag is relaxed by
     ``relax`` of the way toward that same bus, never below halfway to a sag found unsafe
@@ -66,32 +78,19 @@ class BusSag:
         if self.stiff:
             return
         supply = limits.supply
-        self._centre, self._half = window(terms.dq, *limits.budget)     # at no sag
-        self._direction = np.sign(terms.dq)
-        self._reserves = limits.reserves_v
-        self._conductance = np.array([m.count / m.resistance_ohm for m in supply.motors])
-        self._nominal, self._r_battery = limits.nominal_voltage, supply.resistance_ohm
-        self._floor, self._lowest = limits.bus_floor_v, limits.lowest_bus_v()
-        self._friction = bool(np.any(terms.coulomb_v != 0.0))
+        centre, half = window(terms.dq, *limits.budget)     # at no sag
+        # C-ordered float64, the one layout the kernel is compiled (and cached) for.
+        self._along = [np.ascontiguousarray(v, float) for v in (
+            terms.a, terms.b, terms.c, terms.d, terms.emf, terms.dq, centre, half)]
+        conductance = [m.count / m.resistance_ohm for m in supply.motors]
+        self._constants = np.array([
+            *limits.reserves_v, *conductance, limits.nominal_voltage, supply.resistance_ohm,
+            limits.bus_floor_v, limits.lowest_bus_v(), relax, *terms.coulomb_v,
+            COULOMB_SMOOTHING_RAD_S], float)
 
     @property
     def stiff(self) -> bool:
         return self.limits.supply is None
-
-    def _volts(self, x):
-        """The voltages (2, n, 2) at each grid point under x = ṡ² with s̈ held over each
-        stage (with the stage that leaves it, and with the one that arrives:
-        ``PathTerms.voltage``), and the back-EMF (n, 2)."""
-        terms = self.terms
-        speed = np.sqrt(np.maximum(x, 0.0))
-        u = np.diff(x) / (2.0 * self.steps)
-        held = terms.b * x[:, None] + terms.c + (terms.d + terms.emf) * speed[:, None]
-        if self._friction:
-            held = held + terms.coulomb(speed)
-        leaving = np.concatenate([u, u[-1:]])[:, None]
-        arriving = np.concatenate([u[:1], u])[:, None]
-        volts = np.stack([terms.a * leaving + held, terms.a * arriving + held])
-        return volts, terms.emf * speed[:, None]
 
     def settle(self, x) -> bool:
         """Judge the timing x made with ``sag``; True when it fits and the sag stays, else
@@ -99,60 +98,101 @@ class BusSag:
         if self.stiff:
             self.best = (None, x, self.sag)
             return True
-        nominal, sag = self._nominal, self.sag
-        volts, emf = self._volts(x)
-        drawn = self._conductance * volts * (volts - emf)          # P of each joint's motors
-        with np.errstate(invalid='ignore'):
-            stage_bus = 0.5 * (nominal + np.sqrt(nominal * nominal - 4.0 * self._r_battery
-                                                 * np.sum(drawn, axis=-1)))
-        bus = np.where(np.any(np.isnan(stage_bus), axis=0), np.nan, np.min(stage_bus, axis=0))
-        past = np.abs(volts - self._centre) - self._half            # past the window, no sag
-        beyond = np.max(past, axis=(0, 2))
-        browned = ~(bus >= self._floor)                          # NaN too
-        excess = np.where(browned, np.inf,
-                          beyond + np.maximum(nominal - np.nan_to_num(bus), 0.0))
-        fits = excess <= BUS_TOLERANCE_V
-        self.worst_excess_v = float(np.max(excess, initial=0.0))    # no stages: a point
-        if np.all(fits):
-            duration = float(np.sum(2.0 * self.steps / np.maximum(
-                np.sqrt(x[1:]) + np.sqrt(x[:-1]), 1e-12)))
-            if self.best is None or duration < self.best[0]:
-                self.best = (duration, x, sag.copy())
-        target = self._edge_bus(volts, emf, drawn, past, sag)
-        falls = browned | ~(target >= self._floor)
-        # Where it would brown out, the volts there went past the bus: halfway down to the
-        # lowest bus at once. Above its nominal voltage
-        # (regenerating) the bus gives nothing more: the commands stop at the nominal voltage.
-        halfway = 0.5 * (sag + nominal - self._lowest)
-        needed = np.maximum(np.where(falls, np.maximum(sag, halfway), nominal - target), 0.0)
-        binding = beyond + np.maximum(sag, 0.0) > -BUS_TOLERANCE_V
-        # Never relax to a sag a timing was already found unsafe at: halfway to it at most.
-        self.unsafe = np.where(fits, self.unsafe, np.fmax(self.unsafe, sag))
-        lowest = np.where(np.isnan(self.unsafe), -np.inf, 0.5 * (sag + self.unsafe))
-        relaxed = np.maximum(sag - self.relax * (sag - needed), lowest)
-        relax = fits & binding & (relaxed < sag - BUS_TOLERANCE_V)
-        self.sag = np.where(fits, np.where(relax, relaxed, sag), np.maximum(sag, needed))
-        return bool(np.all(fits) and not np.any(relax))
+        fits, relaxing, duration, self.worst_excess_v, sag, self.unsafe = _judge(
+            np.ascontiguousarray(x, float), self.sag, self.unsafe, self.steps,
+            self._constants, *self._along)
+        if fits and (self.best is None or duration < self.best[0]):
+            self.best = (duration, x, self.sag.copy())
+        self.sag = sag
+        return fits and not relaxing
 
-    def _edge_bus(self, volts, emf, drawn, past, sag):
-        """Per grid point, the bus at which the joints whose voltage is at its window's edge
-        would sit exactly on it, at the same speeds: V_j = ±(V_bus − reserve_j), the others as
-        they are; the upper root of V_bus² − V_nominal·V_bus + R_battery·P = 0, P the
-        motors' power (a quadratic in V_bus). The lower of the two stages; NaN where there
-        is none (a brownout), the plain bus where nothing is at an edge."""
-        along = self._direction * volts >= 0.0
-        reserve = np.where(along, *self._reserves)                   # (2, n, 2)
-        edge = past + sag[:, None] >= -BUS_TOLERANCE_V
-        side = np.sign(volts)
-        g = np.where(edge, self._conductance, 0.0)
-        r_b = self._r_battery
-        a = 1.0 + r_b * np.sum(g, axis=-1)
-        b = -self._nominal + r_b * np.sum(g * (-2.0 * reserve - side * emf), axis=-1)
-        c = r_b * np.sum(g * (reserve ** 2 + side * emf * reserve)
-                         + np.where(edge, 0.0, drawn), axis=-1)
-        with np.errstate(invalid='ignore'):
-            root = (-b + np.sqrt(b * b - 4.0 * a * c)) / (2.0 * a)
-        return np.where(np.any(np.isnan(root), axis=0), np.nan, np.min(root, axis=0))
+
+@numba.njit(cache=True)
+def _judge(x, sag, unsafe, steps, constants, a, b, c, d, emf, dq, centre, half):
+    """``BusSag.settle``'s verdict on the timing x made with ``sag``, per grid point i
+    (compiled: a few dozen points, where numpy's calls cost more than the arithmetic):
+    (every point fits, some sag relaxes, the duration, the worst excess, the next sag, the
+    most sag found unsafe). ``constants``: the (driving, braking) reserves, each joint's
+    conductance, the nominal bus, the battery's resistance, the bus floor, the lowest bus,
+    the relaxation, each joint's Coulomb volts and its smoothing speed."""
+    reserves, conductance = constants[0:2], constants[2:4]
+    nominal, r_battery, floor, lowest, relax = constants[4:9]
+    coulomb, smoothing = constants[9:11], constants[11]
+    n = len(x)
+    if n < 2:                                          # no stages: a point fits
+        return True, False, 0.0, 0.0, sag.copy(), unsafe.copy()
+    fits_all, relaxing, worst = True, False, 0.0
+    new_sag, new_unsafe = sag.copy(), unsafe.copy()
+    volts, drawn = np.empty((2, 2)), np.empty((2, 2))
+    for i in range(n):
+        speed = math.sqrt(max(x[i], 0.0))
+        # s̈ held over the stage that leaves point i, and over the one that arrives.
+        leaving = (x[min(i + 1, n - 1)] - x[min(i, n - 2)]) / (2.0 * steps[min(i, n - 2)])
+        arriving = (x[max(i, 1)] - x[max(i - 1, 0)]) / (2.0 * steps[max(i - 1, 0)])
+        bus, beyond = math.inf, -math.inf
+        for s in range(2):
+            u = leaving if s == 0 else arriving
+            power = 0.0
+            for j in range(2):
+                v = (a[i, j] * u + b[i, j] * x[i] + c[i, j] + (d[i, j] + emf[i, j]) * speed
+                     + coulomb[j] * math.tanh(dq[i, j] * speed / smoothing))
+                volts[s, j] = v
+                drawn[s, j] = conductance[j] * v * (v - emf[i, j] * speed)
+                power += drawn[s, j]
+                beyond = max(beyond, abs(v - centre[i, j]) - half[i, j])
+            root = nominal * nominal - 4.0 * r_battery * power
+            if not root >= 0.0:                 # a brownout: no bus
+                bus = math.nan
+            elif bus == bus:
+                bus = min(bus, 0.5 * (nominal + math.sqrt(root)))
+        browned = not bus >= floor
+        excess = math.inf if browned else beyond + max(nominal - bus, 0.0)
+        fits = excess <= BUS_TOLERANCE_V
+        fits_all = fits_all and fits
+        worst = max(worst, excess)
+        # The bus at which the joints at their window's edge would sit exactly on it, at
+        # these speeds: the upper root of V_bus² − V_nominal·V_bus + R_battery·P = 0 with
+        # V_j = ±(V_bus − reserve_j) at the edge, P the motors' power (the lower of the stages).
+        target = math.inf
+        for s in range(2):
+            qa, qb, qc = 1.0, -nominal, 0.0
+            for j in range(2):
+                v = volts[s, j]
+                if abs(v - centre[i, j]) - half[i, j] + sag[i] >= -BUS_TOLERANCE_V:
+                    reserve = reserves[0] if dq[i, j] * v >= 0.0 else reserves[1]
+                    side_emf = np.sign(v) * emf[i, j] * speed
+                    g = conductance[j]
+                    qa += r_battery * g
+                    qb += r_battery * g * (-2.0 * reserve - side_emf)
+                    qc += r_battery * g * (reserve * reserve + side_emf * reserve)
+                else:
+                    qc += r_battery * drawn[s, j]
+            root = qb * qb - 4.0 * qa * qc
+            if not root >= 0.0:
+                target = math.nan
+            elif target == target:
+                target = min(target, (-qb + math.sqrt(root)) / (2.0 * qa))
+        falls = browned or not target >= floor
+        # Where it would brown out, the volts there went past the bus: halfway down to the
+        # lowest bus at once. Above its nominal voltage (regenerating) the bus gives nothing
+        # more: the commands stop at the nominal voltage.
+        needed = max(max(sag[i], 0.5 * (sag[i] + nominal - lowest)) if falls
+                     else nominal - target, 0.0)
+        if fits:
+            binding = beyond + max(sag[i], 0.0) > -BUS_TOLERANCE_V
+            # Never relax to a sag a timing was already found unsafe at: halfway to it.
+            least = -math.inf if math.isnan(unsafe[i]) else 0.5 * (sag[i] + unsafe[i])
+            relaxed = max(sag[i] - relax * (sag[i] - needed), least)
+            if binding and relaxed < sag[i] - BUS_TOLERANCE_V:
+                new_sag[i] = relaxed
+                relaxing = True
+        else:
+            new_unsafe[i] = sag[i] if math.isnan(unsafe[i]) else max(unsafe[i], sag[i])
+            new_sag[i] = max(sag[i], needed)
+    duration = 0.0
+    for i in range(n - 1):
+        duration += 2.0 * steps[i] / max(math.sqrt(x[i + 1]) + math.sqrt(x[i]), 1e-12)
+    return fits_all, relaxing, duration, worst, new_sag, new_unsafe
 
 
 def under_the_bus(solve, terms: PathTerms, limits: TrajectoryLimits, grid, sag_v=None,

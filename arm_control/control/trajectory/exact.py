@@ -132,9 +132,7 @@ class OnePath:
 
 
 def compile_passes() -> None:
-    """Compile the passes now, for the arrays they are given (or load them from numba's cache
-    beside this module): seconds in the first process after an install, a tenth of a second
-    after that. A node does it before it serves, so that no goal waits for it."""
+    """Compile the passes now, for the arrays they are given (``bus.compile_kernels``)."""
     rows = np.zeros((1, 1, 1, 7))
     _passes(rows, rows, np.ones((1, 2)), np.ones(1), 0.0)
     _passes_one_path(rows[0], rows[0], np.ones(2), np.ones(1), 0.0)
