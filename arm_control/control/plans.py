@@ -32,6 +32,7 @@ from arm_control.control.motions import ChainedTrajectory
 from arm_control.control.trajectory import (estimated_bent_duration_s, estimated_duration_s,
                                             refined_trajectory, time_optimal_trajectory,
                                             Trajectory, TrajectoryError, TrajectoryLimits)
+from arm_control.control.trajectory.shaping import prove_room_cells
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
@@ -309,6 +310,13 @@ class BranchRanking:
         plans = planner.plan_to_configurations(start_q, branches) if branches else []
         fastest = self.fastest_branch([plan for plan in plans if plan.ok])
         return fastest if fastest is not None else planner.plan(start_q, goal_xy)
+
+    def prove_cells(self, tiles: int | None = None) -> bool:
+        """``ForbiddenSpace.prove_cells`` for every space the estimates check (the
+        clearance's and the room the bend search keeps), ``tiles`` more at a time (None:
+        all); True once all are."""
+        return (self.clear_space.prove_cells(tiles)
+                and prove_room_cells(self.validator.arm, tiles))
 
     def duration_s(self, waypoints) -> float:
         """The path's duration from rest to rest, estimated with the first grid of bends

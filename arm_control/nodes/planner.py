@@ -101,7 +101,7 @@ class PlannerNode(Node):
         self.create_timer(1.0, self.publish_diagnostics)
         # While idle after start-up, one preset branch's tree per tick (Planner.prepare),
         # then one answer between presets (PresetAnswers), then PROVE_TILES of the cells the
-        # checks look up (Planner.prove_cells).
+        # checks look up (Planner.prove_cells, then the branch choice's: BranchRanking's).
         self.to_prepare = self.ranking.preset_configurations()
         self.cells_proved = False
         self.prepare_timer = self.create_timer(PREPARE_PERIOD_S, self.prepare_next)
@@ -133,7 +133,8 @@ class PlannerNode(Node):
             elif self.preset_answers.pending:
                 self.preset_answers.prepare_next()
             else:
-                self.cells_proved = self.planner.prove_cells(PROVE_TILES)
+                self.cells_proved = (self.planner.prove_cells(PROVE_TILES)
+                                     and self.ranking.prove_cells(PROVE_TILES))
         except Exception as error:                  # a failed table is no reason to stop
             self.get_logger().error(f'preparing the preset paths failed: {error!r}; '
                                     'answering without the rest of them')

@@ -54,6 +54,11 @@ def _with_room(arm: ArmConfig) -> ForbiddenSpace:
     return ForbiddenSpace(dataclasses.replace(arm, world=world))
 
 
+def prove_room_cells(arm: ArmConfig, tiles: int | None = None) -> bool:
+    """``ForbiddenSpace.prove_cells`` for the room the search keeps (``_with_room``)."""
+    return _with_room(arm).prove_cells(tiles)
+
+
 def best_shape(base: BlendedPath, dynamics: ArmDynamics, forbidden, limits: TrajectoryLimits,
                start_speed: float = 0.0, steps=_STEPS):
     """(amplitudes (H, 2) of the bend Σₕ aₕ·bₕ(σ/L) that make ``base`` fastest from
