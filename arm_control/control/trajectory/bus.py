@@ -16,15 +16,14 @@ import numpy as np
 
 from arm_control.control.trajectory.exact import compile_passes, OnePath
 from arm_control.control.trajectory.limits import TrajectoryLimits, window
-from arm_control.control.trajectory.path import clustered
+from arm_control.control.trajectory.path import BUS_GRID, grid_for
 from arm_control.control.trajectory.rows import (LEAST_HALF_WIDTH_V, PathTerms, rows,
                                                  speed_caps)
 from arm_control.model.dynamics import COULOMB_SMOOTHING_RAD_S
 
 BUS_ITERATIONS = 16
-# The bus is found on this many stages first, then only raised where it falls short, in at
+# The bus is found on a coarse grid first, then only raised where it falls short, in at
 # most this many timings on the fine grid (twice, the second time from more sag).
-COARSE_STAGES = 32
 FINE_BUS_ITERATIONS = 6
 # Volts a grid point's voltage may pass its own bus by in the iteration (the final check on
 # dense samples has the last word).
@@ -249,9 +248,9 @@ def exact_timing(terms: PathTerms, grid, limits: TrajectoryLimits, margin_v: flo
 def bus_profile(path, dynamics, limits: TrajectoryLimits, margin_v=0.0, start_speed=0.0,
                 hint=None):
     """(σ, sag) of the path's exact timing under its own bus, found on a coarse grid
-    (``COARSE_STAGES``) from ``hint`` (a like path's (σ, sag)); zero sag when the start
-    speed is out of its reach."""
-    sigma = clustered(path.length, COARSE_STAGES)
+    (``BUS_GRID``: few stages, the blends cut finely) from ``hint`` (a like path's (σ,
+    sag)); zero sag when the start speed is out of its reach."""
+    sigma = grid_for(path, BUS_GRID)
     terms = PathTerms.along(dynamics, path, sigma)
     start = None if hint is None else np.interp(sigma, *hint)
     x, sag = under_the_bus(exact_timing(terms, sigma, limits, margin_v, start_speed),
