@@ -13,6 +13,7 @@ import threading
 import time
 
 import numpy as np
+from planning_checks import FRC_FILE
 import pytest
 
 from arm_control import config
@@ -32,7 +33,6 @@ from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.plan_worker import _Incoming, PlanWorker
 from arm_control.planning.planner import poses_from_waypoints, waypoints_from_poses
-from planning_checks import FRC_FILE
 
 STEP_RAD = 0.001745
 PATHS = {
