@@ -68,7 +68,7 @@ class BusSag:
 
     def __init__(self, terms: PathTerms, limits: TrajectoryLimits, grid, sag_v=None,
                  relax=RELAX):
-        self.terms, self.limits, self.relax = terms, limits, relax
+        self.limits = limits
         self.steps = np.diff(grid)
         self.sag = np.zeros(len(grid)) if sag_v is None else np.array(sag_v, float)
         self.unsafe = np.full(len(grid), np.nan)    # the most sag found unsafe, per point
