@@ -1,7 +1,7 @@
 """The exact time-optimal timing of paths that start from rest (or a given path speed) and
 end at rest, back-EMF kept exactly: the closed-form backward and forward passes of the
 classical time-optimal parameterisation on a grid, for many paths at once (the shape search)
-or one (its passes compiled with numba).
+or one, compiled with numba.
 """
 
 import math
@@ -35,36 +35,80 @@ def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
     at both ends (braking as hard as the rows allow); forward from the start, accelerate as
     hard as they allow at both ends, under that curve.
     """
-    sign = np.where(A >= 0.0, 1.0, -1.0)
-    size = np.abs(A)
-    j, m = np.nonzero(~np.eye(len(W), dtype=bool))             # every ordered pair of rows
-    left, right = sign[..., j] * size[..., m], sign[..., m] * size[..., j]
-    top = np.minimum(top, np.min(first_positive_root(
-        left * B[..., j] - right * B[..., m], left * D[..., j] - right * D[..., m],
-        W[j] * size[..., m] + W[m] * size[..., j] + left * C[..., j] - right * C[..., m]),
-        axis=-1))
-    twice = 2.0 * np.asarray(steps, float)                        # 2Δ per stage
-    stage = twice[None, :, None]
-    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-        bounded = size > 1e-12
-        inverse = np.where(bounded, 1.0 / size, 0.0)
-        slope_x = -sign * B * inverse         # the s̈ bound: slope_x·x + slope_y·y + ...
-        slope_y = -sign * D * inverse
-        brake = np.where(bounded, -(W + sign * C) * inverse, -np.inf)
-        push = np.where(bounded, (W - sign * C) * inverse, np.inf)
-        # Stage i's u at its start (x_i) and at its end (x_i+1 = x_i + 2Δu): y² − x_i = 2Δu.
-        backward = np.stack([slope_x[:, 1:], slope_y[:, 1:], brake[:, 1:],
-                             stage * sign[:, :-1] * B[:, :-1] - size[:, :-1],
-                             stage * sign[:, :-1] * D[:, :-1],
-                             stage * (W + sign[:, :-1] * C[:, :-1]), size[:, :-1]], axis=-1)
-        forward = np.stack([slope_x[:, :-1], slope_y[:, :-1], push[:, :-1],
-                            -(size[:, 1:] + stage * sign[:, 1:] * B[:, 1:]),
-                            -stage * sign[:, 1:] * D[:, 1:],
-                            stage * (W - sign[:, 1:] * C[:, 1:]), size[:, 1:]], axis=-1)
-    speed, ceiling = _passes(backward, forward, np.ascontiguousarray(top), twice,
-                             float(start_speed))
-    speed[start_speed > ceiling[:, 0] * (1.0 + 1e-9) + 1e-12] = np.nan
+    A, B, C, D, W, top = (np.ascontiguousarray(v, float) for v in (A, B, C, D, W, top))
+    return _fastest(A, B, C, D, W, top, 2.0 * np.asarray(steps, float), float(start_speed))
+
+
+@numba.njit(cache=True)
+def _fastest(A, B, C, D, W, top, twice, start_speed):
+    """``fastest_speeds`` compiled (a few dozen points per path, where numpy's calls cost
+    more than the arithmetic): per path, the top speed over every ordered pair of rows and
+    the speed caps, then the rows of each stage's passes, then ``_passes_one_path``."""
+    paths, points, count = A.shape
+    speed = np.empty((paths, points))
+    highest = np.empty(points)
+    backward, forward = np.empty((points - 1, count, 7)), np.empty((points - 1, count, 7))
+    sign, size, inverse = np.empty((points, count)), np.empty((points, count)), \
+        np.empty((points, count))
+    for k in range(paths):
+        for i in range(points):
+            for r in range(count):
+                sign[i, r] = 1.0 if A[k, i, r] >= 0.0 else -1.0
+                size[i, r] = abs(A[k, i, r])
+                inverse[i, r] = 1.0 / size[i, r] if size[i, r] > 1e-12 else 0.0
+            least = top[k, i]
+            for j in range(count):
+                for m in range(count):
+                    if m == j:
+                        continue
+                    left, right = sign[i, j] * size[i, m], sign[i, m] * size[i, j]
+                    alpha = left * B[k, i, j] - right * B[k, i, m]
+                    beta = left * D[k, i, j] - right * D[k, i, m]
+                    gamma = (W[j] * size[i, m] + W[m] * size[i, j] + left * C[k, i, j]
+                             - right * C[k, i, m])
+                    root = _first_positive_root(alpha, beta, gamma)
+                    if root != root or root < least:
+                        least = root
+            highest[i] = least
+        for i in range(points - 1):
+            stage = twice[i]
+            for r in range(count):
+                # The s̈ bound: slope_x·x + slope_y·y + constant (braking at the stage's end,
+                # driving at its start); then α, β, γ and |A| at its other end.
+                bounded_end, bounded_start = size[i + 1, r] > 1e-12, size[i, r] > 1e-12
+                s_end, s_start = sign[i + 1, r], sign[i, r]
+                backward[i, r, 0] = -s_end * B[k, i + 1, r] * inverse[i + 1, r]
+                backward[i, r, 1] = -s_end * D[k, i + 1, r] * inverse[i + 1, r]
+                backward[i, r, 2] = (-(W[r] + s_end * C[k, i + 1, r]) * inverse[i + 1, r]
+                                     if bounded_end else -math.inf)
+                backward[i, r, 3] = stage * s_start * B[k, i, r] - size[i, r]
+                backward[i, r, 4] = stage * s_start * D[k, i, r]
+                backward[i, r, 5] = stage * (W[r] + s_start * C[k, i, r])
+                backward[i, r, 6] = size[i, r]
+                forward[i, r, 0] = -s_start * B[k, i, r] * inverse[i, r]
+                forward[i, r, 1] = -s_start * D[k, i, r] * inverse[i, r]
+                forward[i, r, 2] = ((W[r] - s_start * C[k, i, r]) * inverse[i, r]
+                                    if bounded_start else math.inf)
+                forward[i, r, 3] = -(size[i + 1, r] + stage * s_end * B[k, i + 1, r])
+                forward[i, r, 4] = -stage * s_end * D[k, i + 1, r]
+                forward[i, r, 5] = stage * (W[r] - s_end * C[k, i + 1, r])
+                forward[i, r, 6] = size[i + 1, r]
+        path_speed, ceiling = _passes_one_path(backward, forward, highest, twice, start_speed)
+        if start_speed > ceiling[0] * (1.0 + 1e-9) + 1e-12:
+            speed[k] = math.nan
+        else:
+            speed[k] = path_speed
     return speed
+
+
+@numba.njit(cache=True)
+def _first_positive_root(alpha, beta, gamma):
+    """``first_positive_root`` of one quadratic."""
+    if gamma < 0.0:
+        return 0.0
+    discriminant = beta * beta - 4.0 * alpha * gamma
+    denominator = math.sqrt(discriminant) - beta if discriminant >= 0.0 else math.nan
+    return 2.0 * gamma / denominator if denominator > 0.0 else math.inf
 
 
 class OnePath:
@@ -134,18 +178,9 @@ class OnePath:
 def compile_passes() -> None:
     """Compile the passes now, for the arrays they are given (``bus.compile_kernels``)."""
     rows = np.zeros((1, 1, 1, 7))
-    _passes(rows, rows, np.ones((1, 2)), np.ones(1), 0.0)
     _passes_one_path(rows[0], rows[0], np.ones(2), np.ones(1), 0.0)
-
-
-@numba.njit(cache=True)
-def _passes(backward, forward, top, twice, start_speed):
-    """``_passes_one_path`` for each of K paths: (speeds, ceilings), each (K, n)."""
-    speed, ceiling = np.empty(top.shape), np.empty(top.shape)
-    for k in range(top.shape[0]):
-        speed[k], ceiling[k] = _passes_one_path(backward[k], forward[k], top[k], twice,
-                                                start_speed)
-    return speed, ceiling
+    one = np.ones((1, 2, 1))
+    _fastest(one, one, one, one, np.ones(1), np.ones((1, 2)), np.ones(1), 0.0)
 
 
 @numba.njit(cache=True)
