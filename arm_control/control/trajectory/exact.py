@@ -10,16 +10,6 @@ import numba
 import numpy as np
 
 
-def first_positive_root(alpha, beta, gamma):
-    """The least y > 0 with α·y² + β·y + γ = 0, for γ ≥ 0 (α·y² + β·y + γ ≥ 0 on [0, y]);
-    inf when there is none, 0 when γ < 0. Written y = 2γ/(√(β² − 4αγ) − β): no cancellation,
-    and it covers α = 0."""
-    with np.errstate(divide='ignore', invalid='ignore'):
-        denominator = np.sqrt(beta * beta - 4.0 * alpha * gamma) - beta
-        root = np.where(denominator > 0.0, 2.0 * gamma / denominator, np.inf)
-    return np.where(gamma < 0.0, 0.0, root)
-
-
 def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
     """The fastest path speeds ṡ (K, n) along K paths sampled on one grid, from
     ``start_speed`` to rest at the end; NaN rows where the start speed is out of reach.
@@ -103,7 +93,9 @@ def _fastest(A, B, C, D, W, top, twice, start_speed):
 
 @numba.njit(cache=True)
 def _first_positive_root(alpha, beta, gamma):
-    """``first_positive_root`` of one quadratic."""
+    """The least y > 0 with α·y² + β·y + γ = 0, for γ ≥ 0 (α·y² + β·y + γ ≥ 0 on [0, y]);
+    inf when there is none, 0 when γ < 0. Written y = 2γ/(√(β² − 4αγ) − β): no cancellation,
+    and it covers α = 0."""
     if gamma < 0.0:
         return 0.0
     discriminant = beta * beta - 4.0 * alpha * gamma
@@ -122,8 +114,9 @@ class OnePath:
     """
 
     def __init__(self, A, B, C, D, W, top, steps, voltage_rows=2, least=1e-3):
-        self.voltage_rows, self.least = voltage_rows, least
-        self.W, self.top = np.asarray(W, float), np.asarray(top, float)
+        self.voltage_rows, self.least = voltage_rows, float(least)
+        # C-ordered float64 (the layout the kernel is compiled and cached for).
+        self.W, self.top = np.ascontiguousarray(W, float), np.ascontiguousarray(top, float)
         sign = np.where(A >= 0.0, 1.0, -1.0)
         size = np.abs(A)
         self.sign_c = sign * C
@@ -132,47 +125,75 @@ class OnePath:
             self.inverse = np.where(self.bounded, 1.0 / size, 0.0)
         j, m = np.nonzero(~np.eye(A.shape[-1], dtype=bool))     # every ordered pair of rows
         left, right = sign[:, j] * size[:, m], sign[:, m] * size[:, j]
-        self.pairs = (j, m, size[:, m], size[:, j], left * B[:, j] - right * B[:, m],
-                      left * D[:, j] - right * D[:, m], left * C[:, j] - right * C[:, m])
+        self.pairs = tuple(np.ascontiguousarray(v) for v in (
+            j, m, size[:, m], size[:, j], left * B[:, j] - right * B[:, m],
+            left * D[:, j] - right * D[:, m], left * C[:, j] - right * C[:, m]))
         twice = 2.0 * np.asarray(steps, float)
-        self.stage = twice[:, None]
+        stage = twice[:, None]
         self.twice = twice
         inverse = self.inverse
         slope_x, slope_y = -sign * B * inverse, -sign * D * inverse
         # Per stage and row, as ``fastest_speeds``: slopes, constant (set per sag), α, β,
         # γ (set per sag) and |A| of the other end.
         self.backward = np.stack([slope_x[1:], slope_y[1:], slope_x[1:],
-                                  self.stage * sign[:-1] * B[:-1] - size[:-1],
-                                  self.stage * sign[:-1] * D[:-1], slope_x[1:], size[:-1]],
+                                  stage * sign[:-1] * B[:-1] - size[:-1],
+                                  stage * sign[:-1] * D[:-1], slope_x[1:], size[:-1]],
                                  axis=-1)
         self.forward = np.stack([slope_x[:-1], slope_y[:-1], slope_x[:-1],
-                                 -(size[1:] + self.stage * sign[1:] * B[1:]),
-                                 -self.stage * sign[1:] * D[1:], slope_x[:-1], size[1:]],
+                                 -(size[1:] + stage * sign[1:] * B[1:]),
+                                 -stage * sign[1:] * D[1:], slope_x[:-1], size[1:]],
                                 axis=-1)
 
     def speeds(self, sag_v=None, start_speed: float = 0.0) -> np.ndarray:
         """The fastest path speeds ṡ (n,) from ``start_speed`` to rest with the bus
         ``sag_v`` (n,) below its nominal voltage (None: none); NaN where the start speed is
         out of reach."""
-        W = self.W
-        if sag_v is not None:
-            W = W.copy()
-            rows = self.voltage_rows
-            W[:, :rows] = np.maximum(W[:, :rows] - np.asarray(sag_v, float)[:, None],
-                                     self.least)
-        j, m, size_m, size_j, alpha, beta, constant = self.pairs
-        top = np.minimum(self.top, np.min(first_positive_root(
-            alpha, beta, W[:, j] * size_m + W[:, m] * size_j + constant), axis=-1))
-        low, high = W + self.sign_c, W - self.sign_c
-        self.backward[..., 2] = np.where(self.bounded, -low * self.inverse, -np.inf)[1:]
-        self.backward[..., 5] = self.stage * low[:-1]
-        self.forward[..., 2] = np.where(self.bounded, high * self.inverse, np.inf)[:-1]
-        self.forward[..., 5] = self.stage * high[1:]
-        speed, ceiling = _passes_one_path(self.backward, self.forward, top, self.twice,
-                                          float(start_speed))
-        if start_speed > ceiling[0] * (1.0 + 1e-9) + 1e-12:
-            return np.full(len(speed), np.nan)
-        return np.array(speed)
+        narrowed = sag_v is not None
+        sag = np.ascontiguousarray(sag_v if narrowed else np.zeros(len(self.twice) + 1),
+                                   float)
+        return _one_path(self.W, sag, narrowed, self.voltage_rows, self.least, *self.pairs,
+                         self.top, self.sign_c, self.bounded, self.inverse, self.twice,
+                         self.backward, self.forward, float(start_speed))
+
+
+@numba.njit(cache=True)
+def _one_path(W, sag, narrowed, voltage_rows, least, j, m, size_m, size_j, alpha, beta,
+              constant, top, sign_c, bounded, inverse, twice, backward, forward,
+              start_speed):
+    """``OnePath.speeds`` compiled: the voltage rows' half-widths narrowed by the sag, the
+    top speed over every pair of rows, the constants of the passes' rows that depend on
+    them (in ``backward`` and ``forward``), then ``_passes_one_path``."""
+    points, count = W.shape
+    width = np.empty(count)
+    low, high = np.empty((points, count)), np.empty((points, count))
+    highest = np.empty(points)
+    for i in range(points):
+        for r in range(count):
+            w = W[i, r]
+            if narrowed and r < voltage_rows:
+                w = w - sag[i]
+                if w < least:
+                    w = least
+            width[r] = w
+            low[i, r], high[i, r] = w + sign_c[i, r], w - sign_c[i, r]
+        lowest_top = top[i]
+        for p in range(len(j)):
+            root = _first_positive_root(alpha[i, p], beta[i, p], width[j[p]] * size_m[i, p]
+                                        + width[m[p]] * size_j[i, p] + constant[i, p])
+            if root != root or root < lowest_top:
+                lowest_top = root
+        highest[i] = lowest_top
+    for i in range(points - 1):
+        for r in range(count):
+            backward[i, r, 2] = -low[i + 1, r] * inverse[i + 1, r] if bounded[i + 1, r] \
+                else -math.inf
+            backward[i, r, 5] = twice[i] * low[i, r]
+            forward[i, r, 2] = high[i, r] * inverse[i, r] if bounded[i, r] else math.inf
+            forward[i, r, 5] = twice[i] * high[i + 1, r]
+    speed, ceiling = _passes_one_path(backward, forward, highest, twice, start_speed)
+    if start_speed > ceiling[0] * (1.0 + 1e-9) + 1e-12:
+        speed[:] = math.nan
+    return speed
 
 
 def compile_passes() -> None:
@@ -181,6 +202,8 @@ def compile_passes() -> None:
     _passes_one_path(rows[0], rows[0], np.ones(2), np.ones(1), 0.0)
     one = np.ones((1, 2, 1))
     _fastest(one, one, one, one, np.ones(1), np.ones((1, 2)), np.ones(1), 0.0)
+    path = OnePath(one[0], one[0], one[0], one[0], one[0], np.ones(2), np.ones(1), 1)
+    path.speeds(np.ones(2))
 
 
 @numba.njit(cache=True)
