@@ -19,11 +19,11 @@ import pytest
 from arm_control import config
 from arm_control.control.closed_loop import ClosedLoop
 from arm_control.control.goals import Goal
-from arm_control.control.plans import (KeptTrajectories, PathPlan, PlanRequest, PlanTimer,
-                                       preset_pairs)
-from arm_control.control.trajectory import (refined_trajectory, time_optimal_trajectory,
-                                            TrajectoryLimits)
-from arm_control.control.trajectory.bus import exact_timing
+from arm_control.control.plans import (BranchRanking, KeptTrajectories, PathPlan, PlanRequest,
+                                       PlanTimer, preset_pairs)
+from arm_control.control.trajectory import (bus, exact, refined_trajectory,
+                                            time_optimal_trajectory, TrajectoryLimits)
+from arm_control.control.trajectory.bus import compile_kernels, exact_timing
 from arm_control.control.trajectory.exact import fastest_speeds
 from arm_control.control.trajectory.path import BlendedPath, FINE_GRID, grid_for
 from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
@@ -125,6 +125,24 @@ def test_along_many_corners_the_fine_timing_is_the_faster_and_the_quick_one_near
     assert_sound(quick, waypoints[0], waypoints[-1], dynamics, forbidden, limits)
     assert fine.duration_s <= 1.01 * quick.duration_s
     assert quick.duration_s <= 1.25 * fine.duration_s
+
+
+def test_no_timing_compiles_a_kernel_after_the_warm_up(setup):
+    """The nodes compile the timing's kernels before they serve (``compile_kernels``); a
+    goal's timing must then find them compiled for its arrays: a read-only sag had numba
+    compile a second version of one, for a second or more, in the middle of a goal."""
+    arm, dynamics, forbidden, limits = setup
+    compile_kernels()
+    kernels = (bus._judge, exact._fastest, exact._one_path, exact._passes_one_path)
+    compiled = [len(kernel.signatures) for kernel in kernels]
+    ranking = BranchRanking(arm)
+    for waypoints in PATHS.values():
+        waypoints = np.array(waypoints)
+        quick = time_optimal_trajectory(waypoints, dynamics, forbidden, limits, quick=True)
+        refined_trajectory(quick, 0.05, dynamics, forbidden, limits)
+        time_optimal_trajectory(waypoints, dynamics, forbidden, limits)
+        ranking.duration_s(waypoints)
+    assert [len(kernel.signatures) for kernel in kernels] == compiled
 
 
 @pytest.mark.parametrize('name', ['up to the front', 'front over the top to the back',

@@ -14,7 +14,7 @@ import math
 import numba
 import numpy as np
 
-from arm_control.control.trajectory.exact import compile_passes, OnePath
+from arm_control.control.trajectory.exact import compile_passes, kernel_array, OnePath
 from arm_control.control.trajectory.limits import TrajectoryLimits, window
 from arm_control.control.trajectory.path import BUS_GRID, grid_for
 from arm_control.control.trajectory.rows import (LEAST_HALF_WIDTH_V, PathTerms, rows,
@@ -69,7 +69,7 @@ class BusSag:
     def __init__(self, terms: PathTerms, limits: TrajectoryLimits, grid, sag_v=None,
                  relax=RELAX):
         self.limits = limits
-        self.steps = np.diff(grid)
+        self.steps = kernel_array(np.diff(grid))
         self.sag = np.zeros(len(grid)) if sag_v is None else np.array(sag_v, float)
         self.unsafe = np.full(len(grid), np.nan)    # the most sag found unsafe, per point
         self.worst_excess_v = np.inf                # of the last timing judged
@@ -78,8 +78,7 @@ class BusSag:
             return
         supply = limits.supply
         centre, half = window(terms.dq, *limits.budget)     # at no sag
-        # C-ordered float64, the one layout the kernel is compiled (and cached) for.
-        self._along = [np.ascontiguousarray(v, float) for v in (
+        self._along = [kernel_array(v) for v in (
             terms.a, terms.b, terms.c, terms.d, terms.emf, terms.dq, centre, half)]
         conductance = [m.count / m.resistance_ohm for m in supply.motors]
         self._constants = np.array([
@@ -98,8 +97,8 @@ class BusSag:
             self.best = (None, x, self.sag)
             return True
         fits, relaxing, duration, self.worst_excess_v, sag, self.unsafe = _judge(
-            np.ascontiguousarray(x, float), self.sag, self.unsafe, self.steps,
-            self._constants, *self._along)
+            kernel_array(x), self.sag, self.unsafe, self.steps, self._constants,
+            *self._along)
         if fits and (self.best is None or duration < self.best[0]):
             self.best = (duration, x, self.sag.copy())
         self.sag = sag

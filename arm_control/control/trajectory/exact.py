@@ -10,6 +10,13 @@ import numba
 import numpy as np
 
 
+def kernel_array(values) -> np.ndarray:
+    """``values`` as C-ordered, writable float64: the one layout the kernels are compiled
+    (and cached) for. Another (a read-only view, say) would be compiled anew, for a second
+    or more, in the middle of a goal."""
+    return np.require(values, float, ['C', 'W'])
+
+
 def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
     """The fastest path speeds ṡ (K, n) along K paths sampled on one grid, from
     ``start_speed`` to rest at the end; NaN rows where the start speed is out of reach.
@@ -25,7 +32,7 @@ def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
     at both ends (braking as hard as the rows allow); forward from the start, accelerate as
     hard as they allow at both ends, under that curve.
     """
-    A, B, C, D, W, top = (np.ascontiguousarray(v, float) for v in (A, B, C, D, W, top))
+    A, B, C, D, W, top = (kernel_array(v) for v in (A, B, C, D, W, top))
     return _fastest(A, B, C, D, W, top, 2.0 * np.asarray(steps, float), float(start_speed))
 
 
@@ -115,8 +122,7 @@ class OnePath:
 
     def __init__(self, A, B, C, D, W, top, steps, voltage_rows=2, least=1e-3):
         self.voltage_rows, self.least = voltage_rows, float(least)
-        # C-ordered float64 (the layout the kernel is compiled and cached for).
-        self.W, self.top = np.ascontiguousarray(W, float), np.ascontiguousarray(top, float)
+        self.W, self.top = kernel_array(W), kernel_array(top)
         sign = np.where(A >= 0.0, 1.0, -1.0)
         size = np.abs(A)
         self.sign_c = sign * C
@@ -125,9 +131,10 @@ class OnePath:
             self.inverse = np.where(self.bounded, 1.0 / size, 0.0)
         j, m = np.nonzero(~np.eye(A.shape[-1], dtype=bool))     # every ordered pair of rows
         left, right = sign[:, j] * size[:, m], sign[:, m] * size[:, j]
-        self.pairs = tuple(np.ascontiguousarray(v) for v in (
-            j, m, size[:, m], size[:, j], left * B[:, j] - right * B[:, m],
-            left * D[:, j] - right * D[:, m], left * C[:, j] - right * C[:, m]))
+        self.pairs = (np.require(j, np.int64, ['C', 'W']), np.require(m, np.int64, ['C', 'W']),
+                      *(kernel_array(v) for v in (
+                          size[:, m], size[:, j], left * B[:, j] - right * B[:, m],
+                          left * D[:, j] - right * D[:, m], left * C[:, j] - right * C[:, m])))
         twice = 2.0 * np.asarray(steps, float)
         stage = twice[:, None]
         self.twice = twice
@@ -149,8 +156,7 @@ class OnePath:
         ``sag_v`` (n,) below its nominal voltage (None: none); NaN where the start speed is
         out of reach."""
         narrowed = sag_v is not None
-        sag = np.ascontiguousarray(sag_v if narrowed else np.zeros(len(self.twice) + 1),
-                                   float)
+        sag = kernel_array(sag_v if narrowed else np.zeros(len(self.twice) + 1))
         return _one_path(self.W, sag, narrowed, self.voltage_rows, self.least, *self.pairs,
                          self.top, self.sign_c, self.bounded, self.inverse, self.twice,
                          self.backward, self.forward, float(start_speed))
