@@ -138,7 +138,7 @@ def main(argv):
     moves = [SUITE[i] for i in options['moves']] if options['moves'] else SUITE
     rows = []
     # A warm-up, as the nodes' worker does before it is ready: the first timing in a process
-    # loads the compiled passes (0.1-0.2 s), which the first move would wait for.
+    # loads the compiled kernels (0.1-0.2 s), which the first move would wait for.
     name, start_xy, goal_xy = moves[0]
     first = Move(name, start_xy, goal_xy, arm, controller_config, None, forbidden, None)
     run_ours(arm, controller_config, planner, _start_configuration(first), goal_xy, seed=0)

@@ -262,7 +262,7 @@ def run(args) -> list:
     # After the nodes: IPOPT's threads and this process's planning would disturb them.
     planner = Planner(arm, config.load('planner')[1])
     # A warm-up, as the nodes' worker does before it is ready: the first timing in a process
-    # loads the compiled passes (0.1-0.2 s), which the first move would wait for.
+    # loads the compiled kernels (0.1-0.2 s), which the first move would wait for.
     first = next(row for row in rows if row['start_q'] is not None)
     in_process_s(arm, controller_config, planner, np.round(first['start_q'], 2),
                  first['goal_xy'], 0)

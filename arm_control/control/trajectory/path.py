@@ -26,9 +26,9 @@ FINE_GRID = (0.0075, 60, 260, 16)
 # ... a quick timing (the arm starts on it while the fine one is found) on this one, and
 # the bus a fine timing starts from on the last. With a long path's many blends (the FRC
 # robot's) cut in r/4, or not cut at all, their accelerations went unseen between the
-# grid's points: the quick timing then failed its check and came out up to 3.6x slower
-# (scaled until it passed), and the bus found for the fine one sagged too far, up to 1.45x
-# slower (the FRC robot's 34 moves of bench/planning_ros.py: 6 faster, none slower).
+# grid's points: the quick timing then failed its check and came out up to 3.8x the fine
+# one (scaled until it passed), and the bus found for the fine one sagged too far, up to
+# 1.45x slower (the FRC robot's 34 moves of bench/planning_ros.py: 6 faster, none slower).
 QUICK_GRID = (0.05, 32, 48, 8)
 BUS_GRID = (math.inf, 32, 32, 8)
 
