@@ -32,7 +32,8 @@ from arm_control.control.trajectory.path import (BlendedPath, clean_waypoints, c
                                                  QUICK_GRID, split_at_stops, turn_angle,
                                                  unit)
 from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
-from arm_control.control.trajectory.shaping import best_shape, free_shape, SEARCH_STAGES
+from arm_control.control.trajectory.shaping import (best_shape, faster_shape, free_shape,
+                                                    SEARCH_STAGES)
 from arm_control.control.trajectory.timed import Trajectory
 from arm_control.control.trajectory.timing import time_piece, TimedPiece, verified
 from arm_control.model.dynamics import ArmDynamics
@@ -283,9 +284,10 @@ def _follow(points, velocity, dynamics, forbidden, limits, step_rad, reshape=Fal
         # start's direction alone).
         base = BlendedPath(points, radii, start_direction, start_radius, flat_start=speed > 0)
         shape, bus, _ = best_shape(base, dynamics, forbidden, limits, speed)
-        shape = free_shape(base, shape, forbidden, step_rad)
+        shape, checked_bus = faster_shape(base, free_shape(base, shape, forbidden, step_rad),
+                                          dynamics, limits, speed)
         return [_timed_piece(points, radii, dynamics, limits, speed, start_direction,
-                             start_radius, shape=shape, bus_hint=bus)]
+                             start_radius, shape=shape, bus_hint=checked_bus or bus)]
     pieces = []
     for i, (piece_points, piece_radii) in enumerate(split_at_stops(points, radii)):
         first_piece = i == 0

@@ -244,13 +244,21 @@ def exact_timing(terms: PathTerms, grid, limits: TrajectoryLimits, margin_v: flo
     return solve
 
 
+def along(grid, margin_v):
+    """A margin as ``bus_profile`` takes it: volts, or (σ, volts) at the ``grid`` points."""
+    return (np.asarray(grid), np.asarray(margin_v)) if np.ndim(margin_v) else margin_v
+
+
 def bus_profile(path, dynamics, limits: TrajectoryLimits, margin_v=0.0, start_speed=0.0,
                 hint=None):
     """(σ, sag) of the path's exact timing under its own bus, found on a coarse grid
     (``BUS_GRID``: few stages, the blends cut finely) from ``hint`` (a like path's (σ,
-    sag)); zero sag when the start speed is out of its reach."""
+    sag)); zero sag when the start speed is out of its reach. ``margin_v``: volts, or
+    (σ, volts) along the path."""
     sigma = grid_for(path, BUS_GRID)
     terms = PathTerms.along(dynamics, path, sigma)
+    if isinstance(margin_v, tuple):
+        margin_v = np.interp(sigma, *margin_v)
     start = None if hint is None else np.interp(sigma, *hint)
     x, sag = under_the_bus(exact_timing(terms, sigma, limits, margin_v, start_speed),
                            terms, limits, sigma, start)

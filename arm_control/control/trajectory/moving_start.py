@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from arm_control.control.trajectory.bus import bus_profile, BusSag, safe
+from arm_control.control.trajectory.bus import along, bus_profile, BusSag, safe
 from arm_control.control.trajectory.limits import TrajectoryLimits
 from arm_control.control.trajectory.path import BlendedPath
 from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
@@ -88,7 +88,8 @@ def time_moving(path: BlendedPath, grid, terms: PathTerms, limits: TrajectoryLim
     if limits.supply is None:
         bus = BusSag(terms, limits, grid)
     else:
-        sigma, sag = bus_profile(path, terms.dynamics, limits, margin_v, start_speed, bus_hint)
+        sigma, sag = bus_profile(path, terms.dynamics, limits, along(grid, margin_v), start_speed,
+                                 bus_hint)
         bus = BusSag(terms, limits, grid, np.interp(grid, sigma, sag), relax=0.0)
     if start_x > x_bound[0]:
         # Moving faster than the caps allow already: let it slow down into them, at half

@@ -70,17 +70,19 @@ def rows(terms: PathTerms, limits: TrajectoryLimits, sag_v=0.0, margin_v=0.0,
     """The rows (A, B, C, D of shape (..., n, rows); W (rows,)) of every limit at once.
 
     ``sag_v`` (scalar or (..., n)): how far the bus sits below its nominal voltage;
-    ``margin_v``: volts kept back from every voltage and current window besides the
-    reserves (the final check's tightening); ``coulomb_speed``: the speeds at which
-    Coulomb friction is taken (None: at speed, c·sign(q')). ``per_point``: the two voltage
-    rows (the first two) left in volts, W then (..., n, rows) with their half-widths as
-    they are, not held above the least (``exact.OnePath`` narrows them by a sag per point).
+    ``margin_v`` (scalar or (..., n)): volts kept back from every voltage and current
+    window besides the reserves (the final check's tightening); ``coulomb_speed``: the
+    speeds at which Coulomb friction is taken (None: at speed, c·sign(q')). ``per_point``:
+    the two voltage rows (the first two) left in volts, W then (..., n, rows) with their
+    half-widths as they are, not held above the least (``exact.OnePath`` narrows them by a
+    sag per point).
     """
     dq, ddq = terms.dq, terms.ddq
     friction = terms.coulomb(coulomb_speed)
     torque = (terms.a, terms.b, terms.c + friction, terms.d)     # T's u, x, 1 and y terms
     driving, braking = limits.budget
-    sag = np.asarray(sag_v, float)[..., None] + margin_v
+    margin_v = np.asarray(margin_v, float)
+    sag = np.asarray(sag_v, float)[..., None] + margin_v[..., None]
     centre, half = window(dq, driving - sag, braking - sag)
     scale = 1.0 if per_point else np.maximum(half, LEAST_HALF_WIDTH_V)
     A, B = [terms.a / scale], [terms.b / scale]

@@ -93,6 +93,10 @@ class Trajectory:
         piece = self._pieces[0]
         return piece.path, float(piece.state(t_s)[0][0])
 
+    def grid_times(self) -> list:
+        """Per piece, the times of its grid points from the trajectory's start."""
+        return [offset + piece.times for offset, piece in zip(self._offsets, self._pieces)]
+
     def check_times(self) -> np.ndarray:
         """Every grid time and stage midpoint: where the constraints were imposed and between."""
         times = []

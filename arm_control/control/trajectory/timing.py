@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from arm_control.control.trajectory.bus import (bus_profile, exact_timing,
+from arm_control.control.trajectory.bus import (along, bus_profile, exact_timing,
                                                 FINE_BUS_ITERATIONS, QUICK_AFTER_FIT,
                                                 under_the_bus)
 from arm_control.control.trajectory.limits import TrajectoryError, TrajectoryLimits
@@ -27,6 +27,8 @@ from arm_control.control.trajectory.timed import Piece, Trajectory
 from arm_control.model.dynamics import ArmDynamics
 
 VOLTAGE_TOLERANCE = 0.05           # V past a window the final check accepts (grid error)
+TIGHTENINGS = 5                    # retimings after a failed check before time is stretched
+LOCAL_SLOWDOWN = 1.02              # a retiming held back locally may cost this much more
 LIMIT_TOLERANCE = 1.02             # ratio of the speed/acceleration caps it accepts
 
 
@@ -64,9 +66,15 @@ def time_from_rest(path, grid, terms: PathTerms, limits: TrajectoryLimits,
         start = None if bus_hint is None else np.interp(grid, *bus_hint)
         x, sag = under_the_bus(solve, terms, limits, grid, start, after_fit=QUICK_AFTER_FIT)
         return x, (grid, sag)
-    sigma, sag = bus_profile(path, terms.dynamics, limits, margin_v, start_speed, bus_hint)
-    x, fine = under_the_bus(solve, terms, limits, grid, np.interp(grid, sigma, sag),
-                            FINE_BUS_ITERATIONS, relax=0.0, give_up=True)
+    sigma, sag = bus_profile(path, terms.dynamics, limits, along(grid, margin_v), start_speed,
+                             bus_hint)
+    start = np.interp(grid, sigma, sag)
+    if bus_hint is not None and np.array_equal(bus_hint[0], grid):
+        # This piece's own bus from its last timing (tightened since): the coarse one alone
+        # had the fine timing miss it, and the safe bus take 1.3x as long.
+        start = np.maximum(start, bus_hint[1])
+    x, fine = under_the_bus(solve, terms, limits, grid, start, FINE_BUS_ITERATIONS, relax=0.0,
+                            give_up=True)
     if x is None:
         # The fine timing ran ahead of the coarse one's bus: start again from the most sag
         # of each coarse point and its neighbours.
@@ -99,6 +107,8 @@ class Verdict:
     excess_v: float
     speed_ratio: float
     accel_ratio: float
+    times: np.ndarray = None        # the check times, and the excess (V) at each
+    excess_at: np.ndarray = None
 
     @property
     def passes(self) -> bool:
@@ -118,29 +128,49 @@ def _past(values, direction, driving, braking):
 def check(trajectory: Trajectory, dynamics: ArmDynamics, limits: TrajectoryLimits) -> Verdict:
     """The trajectory on its check times against every limit, with the exact model (a start
     already faster than a speed cap may slow down into it)."""
-    q, qd, qdd = trajectory.sample_many(trajectory.check_times())
+    times = trajectory.check_times()
+    q, qd, qdd = trajectory.sample_many(times)
     volts = dynamics.voltages(q, qd, qdd)
     direction = np.where(np.abs(qd) > 1e-3, np.sign(qd), 0.0)
     driving, braking = limits.budget
-    excess = -math.inf
+    excess = np.full(len(times), -math.inf)
     if limits.supply is not None:
         bus = limits.supply.bus_voltages(volts, qd)      # NaN: a brownout
-        excess = float(np.max(np.nan_to_num(
-            limits.supply.brownout_voltage + VOLTAGE_TOLERANCE - bus, nan=np.inf)))
+        excess = np.nan_to_num(limits.supply.brownout_voltage + VOLTAGE_TOLERANCE - bus,
+                               nan=np.inf)
         sag = np.maximum(limits.nominal_voltage - np.nan_to_num(bus, nan=0.0), 0.0)[:, None]
         torque = volts - np.array(dynamics.emf_v_per_rad_s) * qd
         current = limits.current_budget_v
-        excess = max(excess, float(np.max(_past(torque, direction, current[:, 0],
-                                                current[:, 1]))))
+        excess = np.maximum(excess, np.max(_past(torque, direction, current[:, 0],
+                                                 current[:, 1]), axis=1))
     else:
         sag = 0.0
-    excess = max(excess, float(np.max(_past(volts, direction, driving - sag, braking - sag))))
+    excess = np.maximum(excess, np.max(_past(volts, direction, driving - sag, braking - sag),
+                                       axis=1))
     with np.errstate(divide='ignore', invalid='ignore'):
         speed_cap = np.maximum(np.array(limits.max_velocity_rad_s), np.abs(qd[0]))
         speed_ratio = float(np.max(np.nan_to_num(np.abs(qd) / speed_cap)))
         accel_ratio = float(np.max(np.nan_to_num(
             np.abs(qdd) / np.array(limits.max_acceleration_rad_s2))))
-    return Verdict(float(np.max(np.abs(volts))), excess, speed_ratio, accel_ratio)
+    return Verdict(float(np.max(np.abs(volts))), float(np.max(excess)), speed_ratio,
+                   accel_ratio, times, excess)
+
+
+def _retimed(pieces, margins, limits: TrajectoryLimits) -> list:
+    """Each piece timed again, ``margins`` (V per grid point) held back from its windows."""
+    out = []
+    for piece, margin in zip(pieces, margins):
+        x, _, bus = time_piece(piece.path, piece.grid, piece.terms, limits, piece.start_speed,
+                               margin, piece.x, piece.bus, piece.coarse)
+        out.append(piece if x is None else dataclasses.replace(piece, x=x, bus=bus))
+    return out
+
+
+def _around(grid_times, times, excess):
+    """Per grid point, the largest ``excess`` at ``times`` on the stages either side of it."""
+    before = np.searchsorted(times, np.append(grid_times[0], grid_times[:-1]), 'left')
+    after = np.searchsorted(times, np.append(grid_times[1:], grid_times[-1]), 'right')
+    return np.array([np.max(excess[a:b], initial=0.0) for a, b in zip(before, after)])
 
 
 def assemble(pieces, start, end) -> Trajectory:
@@ -151,34 +181,45 @@ def assemble(pieces, start, end) -> Trajectory:
 def verified(pieces, start, end, dynamics: ArmDynamics,
              limits: TrajectoryLimits) -> Trajectory:
     """Build the trajectory, check it with the exact model, and tighten until it passes."""
-    solve_limits, margin_v = limits, 0.0
+    solve_limits = limits
+    margins = [np.zeros(len(piece.grid)) for piece in pieces]
     trajectory = assemble(pieces, start, end)
-    for _ in range(3):
+    for attempt in range(TIGHTENINGS):
         verdict = check(trajectory, dynamics, limits)
         if verdict.passes:
             trajectory.peak_voltage = verdict.peak_voltage
             return trajectory
-        # Between grid points the exact model can ask a little more: tighten by the excess
-        # (a few volts at most: a bus that would brown out has none to measure it by).
-        margin_v += min(max(verdict.excess_v, 0.0), 2.0) + VOLTAGE_TOLERANCE
         solve_limits = dataclasses.replace(
             solve_limits,
             max_velocity_rad_s=tuple(np.array(solve_limits.max_velocity_rad_s)
                                      / max(verdict.speed_ratio, 1.0)),
             max_acceleration_rad_s2=tuple(np.array(solve_limits.max_acceleration_rad_s2)
                                           / max(verdict.accel_ratio, 1.0)))
-        retimed = []
-        for piece in pieces:
-            x, _, bus = time_piece(piece.path, piece.grid, piece.terms, solve_limits,
-                                   piece.start_speed, margin_v, piece.x, piece.bus,
-                                   piece.coarse)
-            retimed.append(piece if x is None else dataclasses.replace(piece, x=x, bus=bus))
-        pieces = retimed
-        trajectory = assemble(pieces, start, end)
-    # Last resort: slow the whole thing down until the exact check passes (from rest only:
-    # stretching time would change a moving start's velocity).
+        # Between grid points the exact model can ask a little more: tighten by the excess
+        # (a few volts at most: a bus that would brown out has none to measure it by),
+        # around the grid points where it went past: a whole path held back for one spot
+        # had "floor -> full extension, low" 5 % slower. Everywhere when that costs more
+        # (the bus it leaves can then take the fine timing longer to find), and the last time.
+        excess = np.clip(verdict.excess_at, 0.0, 2.0)
+        options = [[m + float(np.max(excess)) + VOLTAGE_TOLERANCE for m in margins]]
+        if attempt < TIGHTENINGS - 1:
+            options.insert(0, [m + np.where(near > 0.0, near + VOLTAGE_TOLERANCE, 0.0)
+                               for m, near in zip(margins, (
+                                   _around(times, verdict.times, excess)
+                                   for times in trajectory.grid_times()))])
+        best = None
+        for option in options:
+            retimed = _retimed(pieces, option, solve_limits)
+            candidate = assemble(retimed, start, end)
+            if best is None or candidate.duration_s < best[0].duration_s:
+                best = candidate, retimed, option
+            if candidate.duration_s <= LOCAL_SLOWDOWN * trajectory.duration_s:
+                break
+        trajectory, pieces, margins = best
+    # The last retiming, then as a last resort the whole thing slowed down until the exact
+    # check passes (from rest only: stretching time would change a moving start's velocity).
     moving = pieces[0].start_speed > 0.0
-    for factor in () if moving else (1.02, 1.05, 1.1, 1.2, 1.4, 1.7, 2.0, 3.0):
+    for factor in (1.0,) if moving else (1.0, 1.02, 1.05, 1.1, 1.2, 1.4, 1.7, 2.0, 3.0):
         slower = trajectory.scaled(factor)
         verdict = check(slower, dynamics, limits)
         if verdict.passes:
