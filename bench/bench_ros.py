@@ -31,6 +31,7 @@ the same clock). Beside it, per move, from the configuration the arm started fro
     python bench/bench_ros.py --load           # with two busy loops beside it
     python bench/bench_ros.py --sim-speed 5    # in simulated time, 5x real time
     python bench/bench_ros.py --moves 4,5 --repeats 3
+    python bench/bench_ros.py --random 8 --seed 1  # 8 moves drawn at random instead
     python bench/bench_ros.py --param feedback_voltage_reserve:=0.5
     python bench/bench_ros.py --param planning_priority:=0 --planner-param realtime_priority:=0
 
@@ -226,7 +227,8 @@ def run(args) -> list:
     controller_config = dataclasses.replace(controller_config, **{
         name: type(getattr(controller_config, name))(float(value))
         for name, value in overrides.items()})
-    moves = [SUITE[i] for i in args.moves] if args.moves else SUITE
+    suite = random_moves(arm, args.random, args.seed) if args.random else SUITE
+    moves = [suite[i] for i in args.moves] if args.moves else suite
     node_args = {'controller': tuple(arg for param in args.param for arg in ('-p', param)),
                  'planner': tuple(arg for param in args.planner_param for arg in ('-p', param))}
     if args.sim_speed:
@@ -271,7 +273,7 @@ def run(args) -> list:
             row['minimum_s'] = row['local_s'] = math.nan
             continue
         start_q = np.round(row['start_q'], 2)
-        index = SUITE.index(next(m for m in SUITE if m[0] == row['name']))
+        index = suite.index(next(m for m in suite if m[0] == row['name']))
         row['local_s'] = in_process_s(arm, controller_config, planner, start_q,
                                       row['goal_xy'], index)
         row['minimum_s'] = minimum_time.suite_minimums(
@@ -361,6 +363,35 @@ def print_table(arm, rows, args, log_dir) -> None:
               f'{statistics.median(planned):.0f} ms, p95 {np.percentile(planned, 95):.0f} ms.')
 
 
+def random_moves(arm, count: int, seed: int) -> list:
+    """``count`` moves no one tuned for, as (name, start_xy, goal_xy): points drawn evenly
+    over the reachable annulus above the floor that are goals the controller accepts; every
+    other move a short hop (goal 0.1-0.4 m from the start), where a goal's fixed costs weigh
+    most."""
+    rng = np.random.default_rng(seed)
+    validator = GoalValidator(arm)
+    inner, outer = validator.kinematics.reach_m
+
+    def goal_point(near=None):
+        while True:
+            if near is None:
+                radius = math.sqrt(rng.uniform(inner ** 2, outer ** 2))
+                angle = rng.uniform(0.0, math.pi)
+                x, y = radius * math.cos(angle), radius * math.sin(angle)
+            else:
+                step, heading = rng.uniform(0.1, 0.4), rng.uniform(-math.pi, math.pi)
+                x, y = near[0] + step * math.cos(heading), near[1] + step * math.sin(heading)
+            x, y = round(x, 2), round(y, 2)
+            if validator.check(x, y).ok:
+                return x, y
+    moves = []
+    for k in range(count):
+        start = goal_point()
+        goal = goal_point(start if k % 2 else None)
+        moves.append((f'random {k}: {start} -> {goal}', start, goal))
+    return moves
+
+
 def was_kept(row) -> bool:
     """The move started on a fine trajectory the controller kept (``KeptTrajectories``)."""
     return 'kept trajectory' in breakdown_ms(row.get('sentence', ''))
@@ -373,6 +404,9 @@ def main():
                         help='run in simulated time, this many times real time')
     parser.add_argument('--moves', type=lambda text: [int(i) for i in text.split(',')],
                         help='indices into the suite, e.g. 4,5')
+    parser.add_argument('--random', type=int, default=0,
+                        help='this many moves drawn at random (seeded) instead of the suite')
+    parser.add_argument('--seed', type=int, default=0, help='the seed of --random')
     parser.add_argument('--repeats', type=int, default=1, help='runs of each move')
     parser.add_argument('--domain', type=int, help='a ROS domain reserved for you')
     parser.add_argument('--param', action='append', default=[],
