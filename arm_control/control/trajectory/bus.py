@@ -255,6 +255,12 @@ def bus_profile(path, dynamics, limits: TrajectoryLimits, margin_v=0.0, start_sp
     (``BUS_GRID``: few stages, the blends cut finely) from ``hint`` (a like path's (σ,
     sag)); zero sag when the start speed is out of its reach. ``margin_v``: volts, or
     (σ, volts) along the path."""
+    return bus_timing(path, dynamics, limits, margin_v, start_speed, hint)[:2]
+
+
+def bus_timing(path, dynamics, limits: TrajectoryLimits, margin_v=0.0, start_speed=0.0,
+               hint=None):
+    """``bus_profile``'s (σ, sag) and the timing x = ṡ² under it (None with the zero sag)."""
     sigma = grid_for(path, BUS_GRID)
     terms = PathTerms.along(dynamics, path, sigma)
     if isinstance(margin_v, tuple):
@@ -263,5 +269,5 @@ def bus_profile(path, dynamics, limits: TrajectoryLimits, margin_v=0.0, start_sp
     x, sag = under_the_bus(exact_timing(terms, sigma, limits, margin_v, start_speed),
                            terms, limits, sigma, start)
     if x is None:
-        return sigma, np.zeros(len(sigma))
-    return sigma, sag
+        return sigma, np.zeros(len(sigma)), None
+    return sigma, sag, x

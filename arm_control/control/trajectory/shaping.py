@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from arm_control.config import ArmConfig
-from arm_control.control.trajectory.bus import bus_profile, exact_timing, under_the_bus
+from arm_control.control.trajectory.bus import bus_timing, exact_timing, under_the_bus
 from arm_control.control.trajectory.exact import durations, fastest_speeds
 from arm_control.control.trajectory.limits import TrajectoryLimits
 from arm_control.control.trajectory.path import (BlendedPath, BUS_GRID, clustered, forbidden_at,
@@ -153,12 +153,13 @@ def faster_shape(base: BlendedPath, shape, dynamics: ArmDynamics, limits: Trajec
         return None, None
     timed = []
     for candidate in (base, base.with_shape(shape)):
-        sigma = grid_for(candidate, BUS_GRID)
-        sag = np.zeros(len(sigma))
+        sigma, sag, x = grid_for(candidate, BUS_GRID), None, None
         if limits.supply is not None:
-            sigma, sag = bus_profile(candidate, dynamics, limits, 0.0, start_speed)
-        x = exact_timing(PathTerms.along(dynamics, candidate, sigma), sigma, limits, 0.0,
-                         start_speed)(sag)
+            sigma, sag, x = bus_timing(candidate, dynamics, limits, 0.0, start_speed)
+        if x is None:                   # no supply, or no bus found: at the nominal bus
+            x = exact_timing(PathTerms.along(dynamics, candidate, sigma), sigma, limits, 0.0,
+                             start_speed)(np.zeros(len(sigma)))
+            sag = np.zeros(len(sigma))
         if x is None:                   # out of the exact timing's reach: no verdict
             return shape, None
         timed.append((float(durations(np.diff(sigma), np.sqrt(x)[None])[0]), (sigma, sag)))

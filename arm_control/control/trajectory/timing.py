@@ -201,12 +201,12 @@ def verified(pieces, start, end, dynamics: ArmDynamics,
         # had "floor -> full extension, low" 5 % slower. Everywhere when that costs more
         # (the bus it leaves can then take the fine timing longer to find), and the last time.
         excess = np.clip(verdict.excess_at, 0.0, 2.0)
-        options = [[m + float(np.max(excess)) + VOLTAGE_TOLERANCE for m in margins]]
+        everywhere = [m + float(np.max(excess)) + VOLTAGE_TOLERANCE for m in margins]
+        options = [everywhere]
         if attempt < TIGHTENINGS - 1:
-            options.insert(0, [m + np.where(near > 0.0, near + VOLTAGE_TOLERANCE, 0.0)
-                               for m, near in zip(margins, (
-                                   _around(times, verdict.times, excess)
-                                   for times in trajectory.grid_times()))])
+            near = [_around(times, verdict.times, excess) for times in trajectory.grid_times()]
+            options.insert(0, [m + np.where(e > 0.0, e + VOLTAGE_TOLERANCE, 0.0)
+                               for m, e in zip(margins, near)])
         best = None
         for option in options:
             retimed = _retimed(pieces, option, solve_limits)
