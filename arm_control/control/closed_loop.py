@@ -22,19 +22,22 @@ class ClosedLoop:
     ``planner``: given to the core, which then plans and times in its own step (anything
     with ``plan(start_q, goal_xy)``, e.g. ``planning.planner.Planner``). ``observers`` are
     called after every step with (loop, reading, voltage). ``command_delay_s``: each command
-    acts this long after its reading, as through ROS; the core is told so (its step is for
-    when the command acts) unless ``told_delay`` is False.
+    acts this long after its tick, as through ROS; the core is told so (its step is for
+    when the command acts) unless ``told_delay`` is False. ``reading_age_s``: the sensors
+    were read this long before the tick (a reading's transit); the core is told when (the
+    reading's stamp) unless ``told_age`` is False (it then takes the reading as new).
     """
 
     def __init__(self, arm: ArmConfig, controller_config: ControllerConfig, planner=None,
                  start=(1.5708, -1.5708), seed: Optional[int] = 0,
                  physics_step_s: float = 0.001, command_delay_s: float = 0.0,
-                 told_delay: bool = True):
+                 told_delay: bool = True, reading_age_s: float = 0.0, told_age: bool = True):
         self.arm = arm
         self.plant = ArmPlant(arm, start, physics_step_s, seed)
         self.core = ArmController(arm, controller_config, planner)
         self.period_s = controller_config.period_s
         self.command_delay_s, self.told_delay = command_delay_s, told_delay
+        self.reading_age_s, self.told_age = reading_age_s, told_age
         self.forbidden = ForbiddenSpace(arm)
         self.sensors_on = True
         self.lowest_m = 0.0          # the lowest point of either link so far (y, m)
@@ -53,11 +56,13 @@ class ClosedLoop:
     def step(self, reading=None):
         """One control period; ``reading`` replaces the plant's own (None: read it, unless
         ``sensors_on`` is off)."""
+        read_s = self.now
         if reading is None and self.sensors_on:
             reading = self.plant.read()
+        self.plant.advance(self.reading_age_s)
         reached = self.core.goals.counts['reached']
         acts_s = self.now + (self.command_delay_s if self.told_delay else 0.0)
-        voltage = self.core.step(acts_s, reading, self.now)
+        voltage = self.core.step(acts_s, reading, read_s if self.told_age else self.now)
         if self.core.goals.counts['reached'] > reached:
             self.arrivals.append((self.core.goals.goal_q.copy(), self.true_q,
                                   np.array(self.plant.state[2:])))
@@ -67,7 +72,7 @@ class ClosedLoop:
         if self.command_delay_s > 0.0:
             self.plant.advance(self.command_delay_s)
         self.plant.set_voltage(voltage)
-        self.plant.advance(self.period_s - self.command_delay_s)
+        self.plant.advance(self.period_s - self.reading_age_s - self.command_delay_s)
         self.lowest_m = min(self.lowest_m, float(self.forbidden.lowest_point_m(self.true_q)))
         return voltage
 
