@@ -6,6 +6,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rosgraph_msgs.msg import Clock
+from scipy.stats import theilslopes
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from test_controller_process import (assert_each_goal_reached_and_still, goal_publisher,
@@ -50,9 +51,14 @@ def test_the_nodes_follow_the_sims_clock_faster_than_real_time(launch, probe, ar
 
     # The sim's clock ran faster than the wall's while the arm moved (in step with the
     # controller, how much faster depends on how fast it answers: bench/bench_ros.py) ...
-    (wall0, sim0), (wall1, sim1) = clock[began], clock[-1]
-    rate = (sim1 - sim0) / (wall1 - wall0)
+    # The slope over every /clock heard (Theil-Sen), not from the first and last alone: those
+    # are timed when this process heard them, and beside two busy loops they once gave 4.63x
+    # of 4x, which the sim cannot run (a period begins on its timer's tick, or on a late
+    # command in place of the tick it missed).
+    heard = np.array(clock[began:])
+    rate = theilslopes(heard[:, 1], heard[:, 0])[0]
     assert 1.0 < rate <= SIM_SPEED * 1.05, f'the sim ran {rate:.2f}x real time'
+    sim1 = heard[-1, 1]
     # ... and the controller's messages are stamped on it.
     assert abs(stamp_s(setpoints[-1].header.stamp) - sim1) < 0.5
     # The arm moved as in real time: each goal reached and held, nothing below the floor.
