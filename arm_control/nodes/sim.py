@@ -51,8 +51,10 @@ from arm_control.nodes.common import (COMMANDS, declare_parameters, loop_statist
 
 # The physics catches up at most this much at once; the rest of a stall is a pause.
 MAX_CATCH_UP_S = 0.03
-# In simulated time, a period waits at most this long (real time) for the last one's command.
+# In simulated time, a period waits at most this long (real time) for the last one's command,
 LOCKSTEP_WAIT_S = 0.5
+# ... and begins no sooner than its wall time, less this (a timer's jitter).
+WALL_SLACK_S = 0.0002
 
 
 class SimNode(Node):
@@ -82,6 +84,7 @@ class SimNode(Node):
         self.late_commands = 0                    # sent before the period's reading
         self.command_transits_s = []              # from the controller's send to acting
         self.period_began_wall_s = self.wall_clock.now().nanoseconds * 1e-9
+        self.period_due_wall_s = self.period_began_wall_s   # when the next period may begin
 
         self.joint_states_pub = self.create_publisher(JointState, 'joint_states', STATE_STREAM)
         self.encoders_pub = self.create_publisher(JointState, 'motor_encoders', STATE_STREAM)
@@ -158,9 +161,7 @@ class SimNode(Node):
             self.timed_out = False
             self.get_logger().info('voltage commands arriving')
         if self.simulated_time:     # the next period now, if its wall time has come
-            wall_s = self.wall_clock.now().nanoseconds * 1e-9
-            if wall_s - self.period_began_wall_s >= self.period_s / self.config.sim_time_factor:
-                self.step()
+            self.step()
 
     def on_set_state(self, msg: JointState) -> None:
         position = messages.joint_pair(msg, 'position')
@@ -193,6 +194,15 @@ class SimNode(Node):
             waiting = self.last_command_s > -math.inf and not self.commanded_this_period
             if waiting and wall_s - self.period_began_wall_s < LOCKSTEP_WAIT_S:
                 return                        # the controller has not answered this period
+            if wall_s < self.period_due_wall_s - WALL_SLACK_S:
+                return                        # its wall time has not come
+            # Periods keep to the wall's schedule (a whole period late: a new one). Before, a
+            # period begun on a late command, then the timer's tick it replaced, handled
+            # after the next command, could begin two periods at once.
+            wall_period_s = self.period_s / self.config.sim_time_factor
+            on_time = wall_s < self.period_due_wall_s + wall_period_s
+            self.period_due_wall_s = (self.period_due_wall_s if on_time else wall_s) \
+                + wall_period_s
             self.commanded_this_period, self.period_began_wall_s = False, wall_s
             self.plant.advance(self.period_s)
         now = self.now_s()
