@@ -21,6 +21,7 @@ robot_state_publisher gets the URDF of the arm the files describe (the same gene
 wrote urdf/arm.urdf), so its links match the simulated ones.
 """
 
+from pathlib import Path
 import tempfile
 
 from launch import LaunchDescription
@@ -57,6 +58,12 @@ def _bring_up(context):
     clock = [{'use_sim_time': True}] if speed > 0.0 else []
     try:
         arm = check_parameter_files(files)
+        if speed > 0.0:
+            # In a file, in the sim's own section: neither a /** file (a dict here) nor -p
+            # overrides the sim's section of arm.yaml, and the sim had run in real time.
+            folder = Path(tempfile.mkdtemp(prefix='arm_control_'))
+            files.append(folder / 'sim_speed.yaml')
+            files[-1].write_text(f'/sim:\n  ros__parameters:\n    sim_time_factor: {speed}\n')
         if namespace:
             files = namespaced_parameter_files(files, namespace,
                                                tempfile.mkdtemp(prefix='arm_control_'))
@@ -65,7 +72,7 @@ def _bring_up(context):
         raise ParameterError(f'arm_control: no node started: {error}') from error
 
     def arm_node(executable, condition=None):
-        own = [{'sim_time_factor': speed}] if executable == 'sim' and speed > 0.0 else clock
+        own = [] if executable == 'sim' else clock
         return Node(package=PACKAGE, executable=executable, name=executable,
                     parameters=[str(path) for path in files] + own, output='screen',
                     emulate_tty=True, condition=condition)

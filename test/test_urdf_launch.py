@@ -17,6 +17,7 @@ from xml.etree import ElementTree
 from conftest import with_joint
 import numpy as np
 import pytest
+import yaml
 
 from arm_control import config, parameters
 from arm_control.bringup import node_parameters
@@ -307,6 +308,26 @@ def test_a_namespace_moves_every_node_and_its_parameter_sections(
         original, _ = node_parameters([ARM_YAML, robot], node_name)
         assert moved == original
     assert node_parameters(files, 'arm1/controller')[0]['shoulder_pid'] == [60.0, 10.0, 4.0]
+
+
+def test_a_sim_speed_reaches_the_sim_in_its_own_section(launch_description, tmp_path,
+                                                        monkeypatch):
+    """rcl takes a node's own section (/sim) over a /** one, and over -p, whatever the order:
+    the speed given as a /** override left the sim in real time under ros2 launch. It comes
+    in a last file's /sim section (/arm1/sim in a namespace); the other nodes follow /clock."""
+    monkeypatch.setattr(tempfile, 'tempdir', str(tmp_path))
+    for namespace in ('', 'arm1'):
+        actions = bring_up(launch_description, sim_speed='4.0', namespace=namespace)
+        nodes = actions[0].args[0][1:] if namespace else nodes_of(actions)
+        by_name = {n.kwargs['executable']: n for n in nodes
+                   if n.kwargs['package'] == 'arm_control'}
+        section = f'/{namespace}/sim' if namespace else '/sim'
+        files = by_name['sim'].kwargs['parameters']
+        last = yaml.safe_load(Path(files[-1]).read_text())
+        assert last == {section: {'ros__parameters': {'sim_time_factor': 4.0}}}
+        assert node_parameters(files, section.strip('/'))[0]['sim_time_factor'] == 4.0
+        for name in ('controller', 'planner'):
+            assert {'use_sim_time': True} in by_name[name].kwargs['parameters']
 
 
 def test_launch_and_urdf_files_are_installed_under_share(launch_description):
