@@ -144,8 +144,8 @@ class BlendedPath:
                 correction = _ramp(t[near], r, order)
                 if order == 0:                   # minus the polyline's own kink
                     correction -= np.maximum(t[near], 0.0)
-                elif order == 1:
-                    correction -= (t[near] > 0).astype(float)
+                elif order == 1:                 # from knot k on, direction k is the base
+                    correction -= (t[near] >= 0).astype(float)
                 q[near] += correction[:, None] * kink
         if self.start_radius > 0.0:
             near = s < self.start_radius
