@@ -58,15 +58,15 @@ def _bring_up(context):
     clock = [{'use_sim_time': True}] if speed > 0.0 else []
     try:
         arm = check_parameter_files(files)
+        folder = Path(tempfile.mkdtemp(prefix='arm_control_')) if speed > 0.0 or namespace \
+            else None
         if speed > 0.0:
             # In a file, in the sim's own section: neither a /** file (a dict here) nor -p
             # overrides the sim's section of arm.yaml, and the sim had run in real time.
-            folder = Path(tempfile.mkdtemp(prefix='arm_control_'))
             files.append(folder / 'sim_speed.yaml')
             files[-1].write_text(f'/sim:\n  ros__parameters:\n    sim_time_factor: {speed}\n')
         if namespace:
-            files = namespaced_parameter_files(files, namespace,
-                                               tempfile.mkdtemp(prefix='arm_control_'))
+            files = namespaced_parameter_files(files, namespace, folder)
     except (ParameterError, OSError) as error:
         # ros2 launch logs it as an error and exits with 1, before any node has started.
         raise ParameterError(f'arm_control: no node started: {error}') from error

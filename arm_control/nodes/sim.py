@@ -196,9 +196,9 @@ class SimNode(Node):
                 return                        # the controller has not answered this period
             if wall_s < self.period_due_wall_s - WALL_SLACK_S:
                 return                        # its wall time has not come
-            # Periods keep to the wall's schedule (a whole period late: a new one). Before, a
-            # period begun on a late command, then the timer's tick it replaced, handled
-            # after the next command, could begin two periods at once.
+            # Periods keep to the wall's schedule (a whole period late: a new one), so that a
+            # period begun on a late command and the timer's tick it replaced, handled after
+            # the next command, do not begin two periods at once.
             wall_period_s = self.period_s / self.config.sim_time_factor
             on_time = wall_s < self.period_due_wall_s + wall_period_s
             self.period_due_wall_s = (self.period_due_wall_s if on_time else wall_s) \
