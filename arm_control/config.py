@@ -213,6 +213,7 @@ class SimConfig:
     """The simulator's timing, start and noise seed."""
 
     publish_rate_hz: float
+    ground_truth_rate_hz: float     # the true state's samples, published with each reading
     physics_step_s: float
     command_timeout_s: float
     initial_position: tuple[float, float]
@@ -224,8 +225,11 @@ class SimConfig:
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'SimConfig':
         read = Reader(params)
+        publish_rate_hz = read.number('publish_rate_hz', low=0.0, high=1000.0, low_open=True)
         return cls(
-            publish_rate_hz=read.number('publish_rate_hz', low=0.0, high=1000.0, low_open=True),
+            publish_rate_hz=publish_rate_hz,
+            ground_truth_rate_hz=read.number('ground_truth_rate_hz', low=publish_rate_hz,
+                                             high=1000.0),
             physics_step_s=read.number('physics_step_s', low=0.0, high=0.001, low_open=True),
             command_timeout_s=read.positive('command_timeout_s'),
             initial_position=read.numbers('initial_position', 2),

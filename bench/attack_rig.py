@@ -186,7 +186,7 @@ class Bench:
     def trim(self) -> None:
         """The rig keeps every message it hears (some of them 10 MB): keep the recent ones."""
         rig = self.rig
-        for heard, keep in ((rig.truth, 500), (rig.joint_states, 500), (rig.voltages, 500),
+        for heard, keep in ((rig.truth, 5000), (rig.joint_states, 500), (rig.voltages, 500),
                             (rig.diagnostics, 20), (rig.events, 200), (rig.queue, 5),
                             (rig.states, 50)):
             del heard[:-keep]

@@ -152,10 +152,11 @@ class RosMoves:
         rig.spin_until(lambda: any(parse_event(e)[0] in outcome
                                    for e in rig.events_heard(began)), MOVE_TIMEOUT_S)
 
-        def at_rest():
+        def at_rest():          # over REST_FOR_S of samples, whatever their rate
             recent = [row for row in self.truth if row[0] >= self.truth[-1][0] - REST_FOR_S]
             q = np.array([row[1:] for row in recent])
-            return len(recent) > 5 and np.max(np.ptp(q, axis=0)) < REST_BAND_RAD
+            return recent[-1][0] - recent[0][0] >= 0.9 * REST_FOR_S \
+                and np.max(np.ptp(q, axis=0)) < REST_BAND_RAD
         rig.spin_until(lambda: len(self.truth) > 5 and at_rest(), 3.0)
         rig.spin_for(REST_FOR_S)
         events = [e for e in rig.events_heard(began) if parse_event(e)[0] in outcome]
@@ -356,6 +357,13 @@ def print_table(arm, rows, args, log_dir) -> None:
             print(f'ROS / minimum, {label}: median {statistics.median(finite):.2f}, worst '
                   f'{max(finite):.2f}; within {bar:.2f}x: {sum(r <= bar for r in finite)} of '
                   f'{len(runs)} runs.')
+    beyond = [f'{row["name"].split(":")[0]} run {k + 1} from '
+              f'{np.round(row["start_q"], 2).tolist()} ({row["ros_s"] / row["minimum_s"]:.2f})'
+              for name in dict.fromkeys(row['name'] for row in rows)
+              for k, row in enumerate(r for r in rows if r['name'] == name)
+              if row['ros_s'] / row['minimum_s'] > bar]
+    if beyond:
+        print(f'Beyond {bar:.2f}x: {"; ".join(beyond)}.')
     print(f'Floor contact on {contact} moves.')
     planned = [p for p in planning if math.isfinite(p)]
     if planned:

@@ -4,7 +4,7 @@ the arm at rest where it stops.
 The real nodes (sim, planner, controller: ``test/arm_rig.py``'s ArmRig, the installed
 executables on a ROS domain of their own). For each move of the trajectory bench's suite the
 arm is first sent to the move's start and left to settle; then the goal is published and
-the sim's true state (``/sim/ground_truth``, its own stamps, 50 Hz) is read:
+the sim's true state (``/sim/ground_truth``, its own stamps) is read:
 
 - moving: when the arm left its rest, extrapolated back from the samples between 0.2° and
   3° away from it (the distance grows as t² from rest, so √distance is linear in t);

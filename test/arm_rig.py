@@ -24,6 +24,7 @@ from nav_msgs.msg import Path as PathMsg
 from nav_msgs.srv import GetPlan
 import numpy as np
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from ros_harness import lasting
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
@@ -71,6 +72,10 @@ class Heard(list):
 
     def last(self):
         return self[-1][1] if self else None
+
+    def lasting(self, since_s: float, span_s: float) -> list:
+        """``ros_harness.lasting`` of the messages heard since ``since_s``."""
+        return lasting(self.messages(since_s), span_s)
 
 
 def assert_never_forbidden(rig, since_s: float) -> None:
@@ -291,23 +296,23 @@ class ArmRig:
             f'{self.event_log()}, processes alive '
             f'{ {n: p.alive() for n, p in self.processes.items()} }')
 
-    def wait_held(self, q, tolerance_rad=2.0 * DEG, samples=25, timeout_s=10.0) -> bool:
-        """Wait for ``samples`` true states in a row within tolerance of ``q``."""
+    def wait_held(self, q, tolerance_rad=2.0 * DEG, hold_s=0.5, timeout_s=10.0) -> bool:
+        """Wait for the true state to stay within tolerance of ``q`` for ``hold_s``."""
         q = np.asarray(q, float)
         since = time.monotonic()
 
         def held():
-            recent = self.truth.messages(since)[-samples:]
-            return len(recent) == samples and all(
+            recent = self.truth.lasting(since, hold_s)
+            return bool(recent) and all(
                 np.max(np.abs(np.array(m.position) - q)) < tolerance_rad for m in recent)
         return self.spin_until(held, timeout_s)
 
-    def wait_still(self, samples=25, speed_rad_s=0.05, timeout_s=10.0) -> bool:
+    def wait_still(self, hold_s=0.5, speed_rad_s=0.05, timeout_s=10.0) -> bool:
         since = time.monotonic()
 
         def still():
-            recent = self.truth.messages(since)[-samples:]
-            return len(recent) == samples and all(
+            recent = self.truth.lasting(since, hold_s)
+            return bool(recent) and all(
                 np.max(np.abs(np.array(m.velocity))) < speed_rad_s for m in recent)
         return self.spin_until(still, timeout_s)
 

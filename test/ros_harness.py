@@ -28,6 +28,22 @@ PR_SET_PDEATHSIG = 1             # prctl(2)
 RESEND_S = 3.0                   # an idempotent call unanswered this long is sent again
 
 
+def stamp_s(message) -> float:
+    """A message's header stamp, in seconds."""
+    return message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+
+
+def lasting(messages, span_s: float) -> list:
+    """The messages of the last ``span_s`` by their stamps; [] until they span that long
+    (so that a wait means the same time whatever the topic's rate)."""
+    if messages:
+        newest = stamp_s(messages[-1])
+        for k in range(len(messages) - 1, -1, -1):
+            if stamp_s(messages[k]) <= newest - span_s:
+                return messages[k:]
+    return []
+
+
 @contextlib.contextmanager
 def ros_domain():
     """An unused ROS_DOMAIN_ID, locked against other test processes until released."""

@@ -12,6 +12,7 @@ from geometry_msgs.msg import PointStamped, TwistStamped
 from nav_msgs.msg import Path
 import numpy as np
 import pytest
+from ros_harness import lasting
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
@@ -51,9 +52,9 @@ def start_arm(launch, probe, *ros_args):
     assert probe.call(Trigger, '/sim/reset', Trigger.Request()).success
     start = np.array(config.load('sim')[1].initial_position)
 
-    def held_at_start():
-        recent = truth[-25:]
-        return len(recent) == 25 and all(
+    def held_at_start():                 # for half a second of true states
+        recent = lasting(truth, 0.5)
+        return bool(recent) and all(
             np.max(np.abs(np.array(m.position) - start)) < math.radians(2.0) for m in recent)
     assert probe.spin_until(held_at_start, 10.0), 'the controller did not take over the arm'
     truth.clear()

@@ -5,6 +5,7 @@ from pathlib import Path
 import time
 
 import pytest
+from rclpy.time import Time
 from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -27,6 +28,20 @@ def test_joint_states_at_the_configured_rate(launch, probe):
     assert list(message.name) == ['shoulder', 'elbow']
     assert len(message.position) == len(message.velocity) == len(message.effort) == 2
     assert sim.alive()
+
+
+def test_ground_truth_samples_the_physics_between_readings_in_order(launch, probe):
+    launch('sim', '-p', 'ground_truth_rate_hz:=250.0')
+    readings = probe.collect(JointState, '/joint_states')
+    truth = probe.collect(JointState, '/sim/ground_truth')
+    wait_for_messages(probe, readings, 5)
+    first, first_reading = len(truth), len(readings)
+    probe.spin_for(1.0)
+    stamps_ns = [Time.from_msg(m.header.stamp).nanoseconds for m in truth[first:]]
+    gaps_ms = [(b - a) * 1e-6 for a, b in zip(stamps_ns, stamps_ns[1:])]
+    assert min(gaps_ms) > 0.0                               # each instant once, in order
+    assert sorted(gaps_ms)[len(gaps_ms) // 2] == pytest.approx(4.0, abs=0.5)   # 250 Hz
+    assert 35 <= len(readings) - first_reading <= 60        # the readings stay at 50 Hz
 
 
 def test_under_localhost_discovery_it_talks_over_udp_not_shared_memory(launch, probe):
@@ -87,9 +102,12 @@ def test_voltage_drives_the_arm_and_reset_restores_it(launch, probe):
     assert truth[-1].position[1] > -1.5708 + 0.2
     response = probe.call(Trigger, '/sim/reset', Trigger.Request())
     assert response.success
-    after_reset = len(truth)
-    wait_for_messages(probe, truth, after_reset + 1)
-    assert truth[after_reset].position[1] == pytest.approx(-1.5708, abs=0.03)
+    reset_ns = probe.node.get_clock().now().nanoseconds      # the samples before go out too
+
+    def after_reset():
+        return [m for m in truth if Time.from_msg(m.header.stamp).nanoseconds > reset_ns]
+    probe.spin_until(after_reset, 5.0)
+    assert after_reset()[0].position[1] == pytest.approx(-1.5708, abs=0.03)
 
 
 def test_set_state_maps_positions_by_joint_name_and_refuses_unknown_names(launch, probe):

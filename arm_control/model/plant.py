@@ -139,6 +139,13 @@ class ArmPlant:
                 self.state[i] = hi
                 self.state[i + 2] = min(0.0, self.state[i + 2])
 
+    def _power_now(self) -> PowerState:
+        return self.power if not self.resting else self.supply.solve((0.0, 0.0), (0.0, 0.0))
+
+    def effort_nm(self) -> np.ndarray:
+        """Motor torque at each joint now, as the motor controller reports."""
+        return np.array(self.dynamics.motor_torque(self.state[2:], self._power_now().applied_v))
+
     def read(self) -> Reading:
         position, velocity = self.state[:2], self.state[2:]
         potentiometer, noisy_velocity = self.sensors.potentiometers(position, velocity)
@@ -147,12 +154,12 @@ class ArmPlant:
         encoder_velocity = ((encoder - self._last_encoder) / elapsed if elapsed > 0.0
                             else np.zeros(2))
         self._last_encoder, self._last_encoder_time_s = encoder, self.time_s
-        power = self.power if not self.resting else self.supply.solve((0.0, 0.0), (0.0, 0.0))
+        power = self._power_now()
         return Reading(
             time_s=self.time_s,
             potentiometer_rad=potentiometer,
             velocity_rad_s=noisy_velocity,
-            effort_nm=np.array(self.dynamics.motor_torque(velocity, power.applied_v)),
+            effort_nm=self.effort_nm(),
             encoder_rad=encoder,
             encoder_velocity_rad_s=encoder_velocity,
             true_state=np.array(self.state),

@@ -7,6 +7,10 @@ Subscribes ``voltage_command`` (Float64MultiArray [shoulder_V, elbow_V]) and ``~
 ([shoulder_A, elbow_A], one motor of each joint), ``~/events`` (brownouts) and
 ``/diagnostics``; serves ``~/reset`` (Trigger: back to ``initial_position`` at rest).
 
+``~/ground_truth`` carries the true state at ``ground_truth_rate_hz``: the samples since the
+last reading go out with it, each stamped at its own instant, so that a move measured on
+it is timed to a few milliseconds instead of to the reading period.
+
 A command acts from when it arrives: the physics is brought up to that instant with the
 previous one first. No command for ``command_timeout_s`` -> 0 V, as a disabled robot. The
 sim's own late ticks are not the robot's: up to ``MAX_CATCH_UP_S`` since the physics last
@@ -98,6 +102,10 @@ class SimNode(Node):
         self.create_subscription(JointState, '~/set_state', self.on_set_state, COMMANDS)
         self.create_service(Trigger, '~/reset', self.on_reset)
         self.period_s = 1.0 / self.config.publish_rate_hz
+        step_s = self.plant.physics_step_s
+        self.truth_every = max(1, round(1.0 / (self.config.ground_truth_rate_hz * step_s)))
+        self.steps_to_truth = self.truth_every
+        self.truths = []            # (plant s, stamp s, state, effort) since the last reading
         if self.simulated_time:
             self.clock_pub = self.create_publisher(ClockMessage, '/clock', 10)
             self.create_timer(self.period_s / self.config.sim_time_factor, self.step,
@@ -133,8 +141,19 @@ class SimNode(Node):
         if behind_s > MAX_CATCH_UP_S:                 # the sim stalled: the world waited
             self.clock_origin_s += behind_s - MAX_CATCH_UP_S
             behind_s = MAX_CATCH_UP_S
-        steps = math.floor(behind_s / self.plant.physics_step_s + 1e-9)
-        self.plant.advance(steps * self.plant.physics_step_s)
+        self.advance(math.floor(behind_s / self.plant.physics_step_s + 1e-9))
+
+    def advance(self, steps: int) -> None:
+        """``steps`` physics steps, the true state kept every ``truth_every`` of them."""
+        origin_s = self.epoch_s if self.simulated_time else self.clock_origin_s
+        for _ in range(steps):
+            self.plant.advance(self.plant.physics_step_s)
+            self.steps_to_truth -= 1
+            if self.steps_to_truth == 0:
+                self.steps_to_truth = self.truth_every
+                time_s = self.plant.time_s
+                self.truths.append((time_s, origin_s + time_s, list(self.plant.state),
+                                    self.plant.effort_nm()))
 
     def on_voltage(self, msg: Float64MultiArray, info: dict) -> None:
         voltage = list(msg.data)
@@ -204,7 +223,7 @@ class SimNode(Node):
             self.period_due_wall_s = (self.period_due_wall_s if on_time else wall_s) \
                 + wall_period_s
             self.commanded_this_period, self.period_began_wall_s = False, wall_s
-            self.plant.advance(self.period_s)
+            self.advance(round(self.period_s / self.plant.physics_step_s))
         now = self.now_s()
         stalled = now - self.last_step_s > 2.0 * self.period_s     # the sim's, not the robot's
         self.periods_s.append(now - self.last_step_s)
@@ -240,6 +259,12 @@ class SimNode(Node):
         stamp = self.stamp()
         self.encoders_pub.publish(messages.joint_state(stamp, reading.encoder_rad,
                                                        reading.encoder_velocity_rad_s))
+        truths, self.truths = self.truths, []
+        for time_s, stamp_s, state, effort in truths:
+            if time_s < reading.time_s - 1e-9:          # the reading's own goes out below
+                self.truth_pub.publish(messages.joint_state(
+                    Time(nanoseconds=round(stamp_s * 1e9)).to_msg(), state[:2], state[2:],
+                    effort))
         truth = reading.true_state
         self.truth_pub.publish(messages.joint_state(stamp, truth[:2], truth[2:],
                                                     reading.effort_nm))
