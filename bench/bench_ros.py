@@ -152,10 +152,14 @@ class RosMoves:
         rig.spin_until(lambda: any(parse_event(e)[0] in outcome
                                    for e in rig.events_heard(began)), MOVE_TIMEOUT_S)
 
-        def at_rest():          # over REST_FOR_S of samples, whatever their rate
-            recent = [row for row in self.truth if row[0] >= self.truth[-1][0] - REST_FOR_S]
-            q = np.array([row[1:] for row in recent])
-            return recent[-1][0] - recent[0][0] >= 0.9 * REST_FOR_S \
+        def at_rest():          # over REST_FOR_S of samples since the goal, whatever their rate
+            truth, first = self.truth, len(self.truth) - 1
+            if truth[-1][0] < published_s + REST_FOR_S:
+                return False
+            while first > 0 and truth[first - 1][0] >= truth[-1][0] - REST_FOR_S:
+                first -= 1
+            q = np.array([row[1:] for row in truth[first:]])
+            return truth[-1][0] - truth[first][0] >= 0.9 * REST_FOR_S \
                 and np.max(np.ptp(q, axis=0)) < REST_BAND_RAD
         rig.spin_until(lambda: len(self.truth) > 5 and at_rest(), 3.0)
         rig.spin_for(REST_FOR_S)

@@ -24,7 +24,7 @@ from nav_msgs.msg import Path as PathMsg
 from nav_msgs.srv import GetPlan
 import numpy as np
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_harness import lasting
+from ros_harness import lasting, stamp_s
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
@@ -74,8 +74,13 @@ class Heard(list):
         return self[-1][1] if self else None
 
     def lasting(self, since_s: float, span_s: float) -> list:
-        """``ros_harness.lasting`` of the messages heard since ``since_s``."""
-        return lasting(self.messages(since_s), span_s)
+        """``ros_harness.lasting`` of the messages heard since ``since_s`` (looking back
+        from the last only as far as it needs)."""
+        first = len(self)
+        while first > 0 and self[first - 1][0] >= since_s and (
+                first == len(self) or stamp_s(self[first][1]) > stamp_s(self[-1][1]) - span_s):
+            first -= 1
+        return lasting([m for _, m in self[first:]], span_s)
 
 
 def assert_never_forbidden(rig, since_s: float) -> None:

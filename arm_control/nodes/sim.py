@@ -9,7 +9,8 @@ Subscribes ``voltage_command`` (Float64MultiArray [shoulder_V, elbow_V]) and ``~
 
 ``~/ground_truth`` carries the true state at ``ground_truth_rate_hz``: the samples since the
 last reading go out with it, each stamped at its own instant, so that a move measured on
-it is timed to a few milliseconds instead of to the reading period.
+it is timed to a few milliseconds instead of to the reading period. (At 4× simulated time,
+500 a second of wall time had a Python subscriber 2 s behind: the rate is of wall time.)
 
 A command acts from when it arrives: the physics is brought up to that instant with the
 previous one first. No command for ``command_timeout_s`` -> 0 V, as a disabled robot. The
@@ -102,8 +103,11 @@ class SimNode(Node):
         self.create_subscription(JointState, '~/set_state', self.on_set_state, COMMANDS)
         self.create_service(Trigger, '~/reset', self.on_reset)
         self.period_s = 1.0 / self.config.publish_rate_hz
-        step_s = self.plant.physics_step_s
-        self.truth_every = max(1, round(1.0 / (self.config.ground_truth_rate_hz * step_s)))
+        # The rate is of wall time: faster than real time, as many messages a second (the
+        # subscribers' load), fewer samples a simulated second.
+        speed = max(1.0, self.config.sim_time_factor)
+        self.truth_every = max(1, round(speed / (self.config.ground_truth_rate_hz
+                                                 * self.plant.physics_step_s)))
         self.steps_to_truth = self.truth_every
         self.truths = []            # (plant s, stamp s, state, effort) since the last reading
         if self.simulated_time:
@@ -143,9 +147,14 @@ class SimNode(Node):
             behind_s = MAX_CATCH_UP_S
         self.advance(math.floor(behind_s / self.plant.physics_step_s + 1e-9))
 
+    @property
+    def origin_s(self) -> float:
+        """The clock's time at plant time 0."""
+        return self.epoch_s if self.simulated_time else self.clock_origin_s
+
     def advance(self, steps: int) -> None:
         """``steps`` physics steps, the true state kept every ``truth_every`` of them."""
-        origin_s = self.epoch_s if self.simulated_time else self.clock_origin_s
+        origin_s = self.origin_s
         for _ in range(steps):
             self.plant.advance(self.plant.physics_step_s)
             self.steps_to_truth -= 1
@@ -259,15 +268,14 @@ class SimNode(Node):
         stamp = self.stamp()
         self.encoders_pub.publish(messages.joint_state(stamp, reading.encoder_rad,
                                                        reading.encoder_velocity_rad_s))
-        truths, self.truths = self.truths, []
-        for time_s, stamp_s, state, effort in truths:
-            if time_s < reading.time_s - 1e-9:          # the reading's own goes out below
-                self.truth_pub.publish(messages.joint_state(
-                    Time(nanoseconds=round(stamp_s * 1e9)).to_msg(), state[:2], state[2:],
-                    effort))
-        truth = reading.true_state
-        self.truth_pub.publish(messages.joint_state(stamp, truth[:2], truth[2:],
-                                                    reading.effort_nm))
+        # The true states since the last reading, then the reading's, each at its instant.
+        truths = [kept for kept in self.truths if kept[0] < reading.time_s - 1e-9]
+        truths.append((reading.time_s, self.origin_s + reading.time_s, reading.true_state,
+                       reading.effort_nm))
+        self.truths = []
+        for _, stamp_s, state, effort in truths:
+            self.truth_pub.publish(messages.joint_state(
+                Time(nanoseconds=round(stamp_s * 1e9)).to_msg(), state[:2], state[2:], effort))
         battery = BatteryState(header=messages.header(stamp, ''), present=True,
                                voltage=float(reading.bus_voltage),
                                current=-float(reading.supply_current_a))
