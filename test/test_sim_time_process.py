@@ -12,6 +12,7 @@ from std_msgs.msg import String
 from test_controller_process import (assert_each_goal_reached_and_still, goal_publisher,
                                      reached, tool_track)
 
+from arm_control import config
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.common import controller_sees_planner, LATCHED
 
@@ -59,6 +60,10 @@ def test_the_nodes_follow_the_sims_clock_faster_than_real_time(launch, probe, ar
     sim1 = heard[-1, 1]
     # ... and the controller's messages are stamped on it.
     assert abs(stamp_s(setpoints[-1].header.stamp) - sim1) < 0.5
+    # The true state: in order, at its rate a second of wall time (fewer per second of sim).
+    gaps_s = np.diff([stamp_s(m.header.stamp) for m in truth])
+    rate_hz = config.load('sim')[1].ground_truth_rate_hz
+    assert np.min(gaps_s) > 0.0 and abs(np.median(gaps_s) - SIM_SPEED / rate_hz) < 1e-3
     # The arm moved as in real time: each goal reached and held, nothing below the floor.
     q, qd, xy = tool_track(arm, truth)
     assert_each_goal_reached_and_still(goals, xy, qd, 0.031)
