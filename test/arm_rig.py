@@ -74,13 +74,16 @@ class Heard(list):
         return self[-1][1] if self else None
 
     def lasting(self, since_s: float, span_s: float) -> list:
-        """``ros_harness.lasting`` of the messages heard since ``since_s`` (looking back
-        from the last only as far as it needs)."""
-        first = len(self)
-        while first > 0 and self[first - 1][0] >= since_s and (
-                first == len(self) or stamp_s(self[first][1]) > stamp_s(self[-1][1]) - span_s):
-            first -= 1
-        return lasting([m for _, m in self[first:]], span_s)
+        """``ros_harness.lasting`` of the messages heard since ``since_s``, looking back from
+        the last only as far as it needs."""
+        recent = []
+        for arrived, message in reversed(self):
+            if arrived < since_s:
+                break
+            recent.append(message)
+            if stamp_s(message) <= stamp_s(self[-1][1]) - span_s:
+                break
+        return lasting(recent[::-1], span_s)
 
 
 def assert_never_forbidden(rig, since_s: float) -> None:
