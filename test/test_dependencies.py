@@ -30,6 +30,8 @@ MODULE_KEYS = {
     'sensor_msgs': 'sensor_msgs',
     'geometry_msgs': 'geometry_msgs',
     'nav_msgs': 'nav_msgs',
+    'trajectory_msgs': 'trajectory_msgs',
+    'control_msgs': 'control_msgs',
     'diagnostic_msgs': 'diagnostic_msgs',
     'visualization_msgs': 'visualization_msgs',
     'numpy': 'python3-numpy',

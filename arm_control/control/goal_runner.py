@@ -119,6 +119,27 @@ class GoalRunner:
         self.machine.fire(T.GOAL)
         self.ask(now_s, goal, rest_q)
 
+    def follow(self, now_s: float, goal: Goal, motion: Motion) -> tuple[bool, str]:
+        """A trajectory given whole (a ROS client's, checked: ``trajectory_goals``) as the
+        current goal, in place of the queue and any goal in hand: its motion takes over at
+        its ``begin_s`` and is tracked, left and reached as a planned one's."""
+        if not self.machine.can(T.GOAL):
+            return self.reject(now_s, f'{goal.label} rejected: the arm is {self.machine.state}',
+                               str(self.machine.state))
+        dropped = self.drop()
+        if self.setpoints.driving:
+            self.setpoints.brake(now_s)
+        self.queue.start(goal)
+        self.plans.start(now_s)
+        self.counts['started'] += 1
+        self.machine.fire(T.GOAL)
+        self.setpoints.schedule(motion)
+        self.goal_q = motion.final_q
+        self.machine.fire(T.PLAN_READY)
+        self.latency_s = {'trajectory': motion.end_s - motion.begin_s}
+        return self._accept(now_s, Kind.GOAL_ACCEPTED, f'{goal.label} accepted{goal.note}' +
+                            (f'; {dropped} earlier goals dropped' if dropped else ''))
+
     def ask(self, now_s: float, goal: Goal, rest_q, lead_s: Optional[float] = None) -> None:
         """A plan from where the setpoint will be ``lead_s`` ahead (``PREEMPT_LEAD_S`` of
         wall time) if it is still moving then (the new motion takes over there), else from

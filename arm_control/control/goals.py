@@ -37,6 +37,7 @@ class Goal:
     y_m: float
     label: str
     note: str = ''                  # e.g. that it was clamped onto the annulus
+    replan: bool = True             # interrupted, planned again (not a client's trajectory)
 
     @property
     def xy(self) -> tuple[float, float]:
@@ -263,9 +264,10 @@ class GoalQueue:
 
     def put_back(self) -> None:
         """Interrupted (the sensors stopped, the arm was moved): the current goal goes first
-        again."""
+        again, unless it is a client's trajectory (``replan`` False), which ends there."""
         if self.current is not None:
-            self.waiting.appendleft(self.current)
+            if self.current.replan:
+                self.waiting.appendleft(self.current)
             self.current = None
             self.version += 1
 

@@ -49,6 +49,7 @@ from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, int
                                       STATE_STREAM, status)
 from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.plan_link import PlanLink
+from arm_control.nodes.trajectory_server import TrajectoryServer
 from arm_control.parameters import ParameterError
 
 PLANNER_POLL_S = 0.05             # how often to look whether the planner is there
@@ -86,6 +87,7 @@ class ControllerNode(Node):
         self.lock = threading.Lock()                # the core, between the threads
         self.plans = PlanLink(self, self.arm, self.config, self.on_timed_plan)
         self.core = ArmController(self.arm, self.config)
+        self.trajectories = TrajectoryServer(self, params)     # FollowJointTrajectory, topic
         # The latest reading for the loop, and the encoders and bus: (value, received at).
         self.reading = self.encoders = self.bus = None
         self.bad_inputs = self.bad_inputs_said = 0

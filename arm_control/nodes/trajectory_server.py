@@ -1,0 +1,267 @@
+"""The controller's ways in for ROS arm tools, named as ``joint_trajectory_controller`` names
+them: the ``~/follow_joint_trajectory`` action (control_msgs/action/FollowJointTrajectory,
+what MoveIt sends every plan through) and the ``~/joint_trajectory`` topic
+(trajectory_msgs/JointTrajectory, fire and forget; an empty one stops and holds, as
+``~/cancel``).
+
+A shell: the checks are ``control.trajectory_goals``, and a checked trajectory becomes the
+core's current goal (``GoalRunner.follow``), followed by the control loop like a planned
+one. A monitor timer (JTC's action_monitor_rate) sends feedback and ends the goal. Where
+JTC refuses a goal outright (in ROS 2 that carries no result), this server accepts it and
+aborts it at once with the code and the reason, so that a client learns why; a goal
+preempted by a newer one is aborted with ``INVALID_GOAL`` (JTC: cancelled). Without
+control_msgs the action is off, said once; the topic still works.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from rclpy.action import ActionServer, CancelResponse
+from rclpy.task import Future
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from arm_control.config import JOINT_NAMES
+from arm_control.control.goals import Goal
+from arm_control.control.joint_trajectory import (ErrorCode, JointTolerance, TrajectoryPoint,
+                                                  TrajectoryRefused, TrajectoryRequest)
+from arm_control.control.motions import Motion
+from arm_control.control.state_machine import STOPPED
+from arm_control.control.trajectory_goals import (FollowSettings, TrajectoryGoals,
+                                                  TrajectoryWatch)
+from arm_control.nodes import messages
+from arm_control.nodes.common import COMMANDS, guarded
+
+try:
+    from control_msgs.action import FollowJointTrajectory
+except ImportError:                 # a machine without it: the topic only
+    FollowJointTrajectory = None
+
+MONITOR_RATE_HZ = 20.0          # feedback and verdicts this often (JTC's action_monitor_rate)
+# A trajectory that starts from a moving setpoint takes over this far ahead (s), so that the
+# checks finish before it begins.
+MOVING_LEAD_S = 0.1
+
+
+def seconds(duration) -> float:
+    return duration.sec + 1e-9 * duration.nanosec
+
+
+def request_from(trajectory, goal=None) -> TrajectoryRequest:
+    """A JointTrajectory (and the action goal around it) as plain data."""
+    points = tuple(TrajectoryPoint(tuple(p.positions), tuple(p.velocities),
+                                   tuple(p.accelerations), seconds(p.time_from_start))
+                   for p in trajectory.points)
+    stamp = messages.stamp_s(trajectory.header)
+    if goal is None:
+        return TrajectoryRequest(tuple(trajectory.joint_names), points,
+                                 0.0 if math.isnan(stamp) else stamp)
+
+    def tolerances(given):
+        return tuple(JointTolerance(t.name, t.position, t.velocity, t.acceleration)
+                     for t in given)
+    return TrajectoryRequest(tuple(trajectory.joint_names), points,
+                             0.0 if math.isnan(stamp) else stamp,
+                             tolerances(goal.path_tolerance), tolerances(goal.goal_tolerance),
+                             seconds(goal.goal_time_tolerance))
+
+
+def point(q, qd, qdd=None) -> JointTrajectoryPoint:
+    return JointTrajectoryPoint(positions=[float(v) for v in q],
+                                velocities=[float(v) for v in qd],
+                                accelerations=[] if qdd is None else [float(v) for v in qdd])
+
+
+@dataclass
+class Active:
+    """The action goal being followed."""
+
+    handle: object
+    goal: Goal
+    watch: TrajectoryWatch
+    future: Future
+    note: str
+
+
+class TrajectoryServer:
+    """The action server and the topic, on the controller node (its core, lock, clock)."""
+
+    def __init__(self, node, params):
+        self.node = node
+        self.settings = FollowSettings.from_parameters(params)
+        self.config = None
+        self.goals = None
+        self.count = 0
+        self.active = None
+        node.create_subscription(JointTrajectory, '~/joint_trajectory', self.on_topic,
+                                 COMMANDS)
+        self.server = None
+        if FollowJointTrajectory is None:
+            node.get_logger().warning(
+                'control_msgs is not installed: ~/follow_joint_trajectory is off '
+                '(~/joint_trajectory takes trajectories); see docs/ros_arm_interfaces.md')
+            return
+        self.server = ActionServer(node, FollowJointTrajectory, '~/follow_joint_trajectory',
+                                   execute_callback=self.execute,
+                                   cancel_callback=lambda request: CancelResponse.ACCEPT)
+        node.create_timer(1.0 / MONITOR_RATE_HZ, self.monitor)
+
+    @property
+    def bad_inputs(self) -> int:        # ``guarded`` counts a failed callback on the node
+        return self.node.bad_inputs
+
+    @bad_inputs.setter
+    def bad_inputs(self, count: int) -> None:
+        self.node.bad_inputs = count
+
+    def get_logger(self):
+        return self.node.get_logger()
+
+    # ------------------------------------------------------------------ checks, hand-off
+
+    def setpoint_at(self, t_s: float):
+        """(q, q̇, q̈) the arm is commanded at ``t_s``; the estimate at rest before any."""
+        core = self.node.core
+        with self.node.lock:
+            sample = core.setpoints.sample(t_s)
+            if sample is not None:
+                return tuple(np.array(v, float) for v in sample)
+            q = core.estimate[:2].copy() if core.estimate is not None else np.zeros(2)
+        return q, np.zeros(2), np.zeros(2)
+
+    def start(self, request: TrajectoryRequest, source: str):
+        """Check ``request`` and make it the core's goal: (goal, watch, note), or raise
+        ``TrajectoryRefused``."""
+        node = self.node
+        if self.config is not node.config:              # a run-time change of the reserves
+            self.config = node.config
+            self.goals = TrajectoryGoals(node.arm, node.config, self.settings)
+        now = node.core_now_s()
+        moving = bool(np.any(self.setpoint_at(now)[1]))
+        prepared = self.goals.prepare(request, now + (MOVING_LEAD_S if moving else 0.0),
+                                      self.setpoint_at)
+        self.count += 1
+        final = node.core.kinematics.forward(prepared.final_q)
+        goal = Goal(float(final[0]), float(final[1]), f'{source} {self.count}',
+                    f' ({prepared.note})' if prepared.note else '', replan=False)
+        with node.lock:
+            now = node.core_now_s()
+            begin = prepared.begin_s
+            if now > begin:
+                if moving:
+                    raise TrajectoryRefused(ErrorCode.INVALID_GOAL, (
+                        f'checked {now - begin:.3f} s too late to take over the moving arm '
+                        'where it was checked from: send it again'))
+                begin = now                           # from rest: it starts now
+            motion = Motion(prepared.trajectory, begin)
+        accepted, said = node.command(node.core.goals.follow, goal, motion)
+        if not accepted:
+            raise TrajectoryRefused(ErrorCode.INVALID_GOAL, said)
+        return goal, TrajectoryWatch(motion, prepared.tolerances), prepared.note
+
+    def refused(self, source: str, error: TrajectoryRefused) -> None:
+        """Said as a rejected goal is (``~/events``, the error state when idle)."""
+        self.node.command(self.node.core.goals.reject,
+                          f'{source} refused ({error.code.name}): {error.reason}',
+                          error.code.name.lower())
+
+    # ------------------------------------------------------------------ the topic
+
+    @guarded
+    def on_topic(self, msg: JointTrajectory) -> None:
+        if not msg.points:                 # JTC: an empty trajectory stops and holds
+            self.node.command(self.node.core.cancel)
+            return
+        try:
+            self.start(request_from(msg), 'joint_trajectory')
+        except TrajectoryRefused as error:
+            self.refused('joint_trajectory', error)
+
+    # ------------------------------------------------------------------ the action
+
+    async def execute(self, handle):
+        result = FollowJointTrajectory.Result()
+        try:
+            goal, watch, note = self.start(request_from(handle.request.trajectory,
+                                                        handle.request),
+                                           'follow_joint_trajectory goal')
+        except TrajectoryRefused as error:
+            self.refused('follow_joint_trajectory goal', error)
+            handle.abort()
+            result.error_code, result.error_string = int(error.code), error.reason
+            return result
+        except Exception as error:          # a bug must not leave the client waiting
+            self.get_logger().error(f'follow_joint_trajectory goal failed: {error!r}')
+            handle.abort()
+            result.error_code = int(ErrorCode.INVALID_GOAL)
+            result.error_string = f'internal error checking it: {error!r}'
+            return result
+        if self.active is not None:
+            self.finish(self.active, ErrorCode.INVALID_GOAL, 'preempted by a newer goal')
+        future = Future()
+        self.active = Active(handle, goal, watch, future, note)
+        return await future
+
+    def finish(self, active: Active, code: ErrorCode, text: str, cancelled=False) -> None:
+        """End the action goal with ``code`` (and what was done to it, when it succeeds)."""
+        if cancelled:
+            active.handle.canceled()
+        elif code == ErrorCode.SUCCESSFUL:
+            active.handle.succeed()
+            text = active.note
+        else:
+            active.handle.abort()
+        if self.active is active:
+            self.active = None
+        active.future.set_result(FollowJointTrajectory.Result(error_code=int(code),
+                                                              error_string=text))
+
+    @guarded
+    def monitor(self) -> None:
+        """Feedback, then the verdict: path and goal tolerances, cancel, or the arm no
+        longer following it (then, as JTC, it brakes along its path and holds)."""
+        active = self.active
+        if active is None:
+            return
+        core = self.node.core
+        motion = active.watch.motion
+        with self.node.lock:
+            now = self.node.core_now_s()
+            following = (core.setpoints.timeline.last is motion and not core.setpoints.driving
+                         and core.state not in STOPPED)
+            state, error = core.state, core.last_error
+            mine = core.goals.queue.current is active.goal
+            estimate = None if core.estimate is None else core.estimate.copy()
+        why = (f'the arm is {state}' + (f': {error}' if error else '')) if (
+            mine or state in STOPPED) else f'another goal or command took over ({state})'
+        if active.handle.is_cancel_requested:
+            self.stop(motion)
+            self.finish(active, ErrorCode.SUCCESSFUL, 'cancelled: braking to rest along its '
+                                                      'path, holding there', cancelled=True)
+            return
+        if estimate is not None:
+            self.feedback(active, now, estimate)
+        verdict = active.watch.judge(now, following, why, estimate)
+        if verdict is not None:
+            code, text = verdict
+            if code != ErrorCode.SUCCESSFUL:
+                self.stop(motion)
+                self.node.get_logger().warning(f'{active.goal.label} aborted ({code.name}): '
+                                               f'{text}')
+            self.finish(active, code, text)
+
+    def stop(self, motion) -> None:
+        """Brake along the trajectory and hold, if it is still the one the arm follows."""
+        with self.node.lock:
+            ours = self.node.core.setpoints.timeline.last is motion
+        if ours:
+            self.node.command(self.node.core.cancel)
+
+    def feedback(self, active: Active, now: float, estimate) -> None:
+        q, qd, qdd = active.watch.motion.sample(now)
+        feedback = FollowJointTrajectory.Feedback(joint_names=list(JOINT_NAMES))
+        feedback.header.stamp = self.node.get_clock().now().to_msg()
+        feedback.desired = point(q, qd, qdd)
+        feedback.actual = point(estimate[:2], estimate[2:])
+        feedback.error = point(q - estimate[:2], qd - estimate[2:])
+        active.handle.publish_feedback(feedback)
