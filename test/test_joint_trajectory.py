@@ -217,3 +217,14 @@ def test_the_infeasible_timing_parameter_is_validated():
     params['trajectory_infeasible_timing'] = 'slow'
     with pytest.raises(ParameterError, match='trajectory_infeasible_timing'):
         FollowSettings.from_parameters(params)
+
+
+def test_an_arm_on_the_floor_may_leave_it_but_not_come_back(goals):
+    fallen = np.array([-0.349, 0.6563])            # the upper arm down on the floor
+    assert not goals.forbidden.is_free(fallen)
+    up = request(('shoulder', 'elbow'), [(3.0, (1.2, -1.0))])
+    assert goals.prepare(up, 0.0, at_rest(fallen)).note == ''
+    back = request(('shoulder', 'elbow'), [(3.0, (1.2, -1.0)), (6.0, fallen)])
+    with pytest.raises(TrajectoryRefused) as refused:
+        goals.prepare(back, 0.0, at_rest(fallen))
+    assert refused.value.code == ErrorCode.INVALID_GOAL

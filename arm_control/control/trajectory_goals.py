@@ -4,7 +4,8 @@
 a planned one (``GoalRunner.follow``), or refuses it with a ``FollowJointTrajectory`` code:
 
 - every link, sampled along the whole trajectory, keeps out of forbidden space and its
-  clearance (``world.clearance_rad``, as goals do; a start already within it may leave);
+  clearance (``world.clearance_rad``, as goals do; from a start already in either, it may
+  only leave: an arm that sagged or was pushed there must be able to get out);
 - the motors can give it: the exact model's volts within the bus less the reserves, the
   currents within their limits, the bus above brownout (``timing.check``, as for the
   planner's trajectories). A timing they cannot give is refused with where and by how much
@@ -172,8 +173,8 @@ class TrajectoryGoals:
         return '; '.join(parts)
 
     def check_space(self, trajectory, times_s, offset_s: float) -> None:
-        """Refuse a trajectory one of whose links enters forbidden space, or the clearance
-        around it beyond the stretch it starts in. ``offset_s``: the request's time 0 on the
+        """Refuse a trajectory one of whose links enters forbidden space or the clearance
+        around it, beyond the stretch it starts in. ``offset_s``: the request's time 0 on the
         trajectory's clock (NaN: retimed, the point's times no longer hold)."""
         step = self.arm.world.check_step_rad
         times = trajectory.check_times()
@@ -187,8 +188,9 @@ class TrajectoryGoals:
             q = trajectory.sample_many(times)[0]
         free = np.asarray(self.forbidden.is_free(q), bool).reshape(-1)
         clear = np.asarray(self.clear_space.is_free(q), bool).reshape(-1)
-        leaving = np.cumsum(clear) == 0                 # still in the clearance it starts in
-        bad = ~free | (~clear & ~leaving)
+        # The stretch it starts in (forbidden, or within the clearance: an arm pushed or
+        # sagged there) it may leave; once out, it must stay out.
+        bad = (~free & (np.cumsum(free) > 0)) | (~clear & (np.cumsum(clear) > 0))
         if not np.any(bad):
             return
         first = int(np.argmax(~free if np.any(~free) else bad))   # forbidden before close

@@ -13,6 +13,7 @@ preempted by a newer one is aborted with ``INVALID_GOAL`` (JTC: cancelled). With
 control_msgs the action is off, said once; the topic still works.
 """
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 import math
 
@@ -27,6 +28,7 @@ from arm_control.control.joint_trajectory import (ErrorCode, JointTolerance, Tra
                                                   TrajectoryRefused, TrajectoryRequest)
 from arm_control.control.motions import Motion
 from arm_control.control.state_machine import STOPPED
+from arm_control.control.trajectory.bus import compile_kernels
 from arm_control.control.trajectory_goals import (FollowSettings, TrajectoryGoals,
                                                   TrajectoryWatch)
 from arm_control.nodes import messages
@@ -81,6 +83,7 @@ class Active:
     watch: TrajectoryWatch
     future: Future
     note: str
+    begun_s: float          # when it was handed to the core (what the core says since)
 
 
 class TrajectoryServer:
@@ -89,10 +92,12 @@ class TrajectoryServer:
     def __init__(self, node, params):
         self.node = node
         self.settings = FollowSettings.from_parameters(params)
-        self.config = None
-        self.goals = None
+        self.config = node.config
+        self.goals = TrajectoryGoals(node.arm, node.config, self.settings)
+        compile_kernels()           # before the loop starts: a first retiming compiles them
         self.count = 0
         self.active = None
+        self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='trajectories')
         node.create_subscription(JointTrajectory, '~/joint_trajectory', self.on_topic,
                                  COMMANDS)
         self.server = None
@@ -129,9 +134,24 @@ class TrajectoryServer:
             q = core.estimate[:2].copy() if core.estimate is not None else np.zeros(2)
         return q, np.zeros(2), np.zeros(2)
 
-    def start(self, request: TrajectoryRequest, source: str):
-        """Check ``request`` and make it the core's goal: (goal, watch, note), or raise
-        ``TrajectoryRefused``."""
+    def in_worker(self, call, *args) -> Future:
+        """``call(*args)`` on the checking thread, one at a time in the order asked: the
+        executor keeps taking joint states meanwhile (a check that retimes takes tens of
+        ms, and the loop stops the arm on readings a period late). The future's result:
+        (True, value) or (False, the exception)."""
+        future = Future()
+
+        def run():
+            try:
+                future.set_result((True, call(*args)))
+            except Exception as error:
+                future.set_result((False, error))
+        self.worker.submit(run)
+        return future
+
+    def check(self, request: TrajectoryRequest):
+        """The checked trajectory from where the arm will be commanded when it can start:
+        now at rest, ``MOVING_LEAD_S`` ahead when moving (``TrajectoryGoals.prepare``)."""
         node = self.node
         if self.config is not node.config:              # a run-time change of the reserves
             self.config = node.config
@@ -140,6 +160,13 @@ class TrajectoryServer:
         moving = bool(np.any(self.setpoint_at(now)[1]))
         prepared = self.goals.prepare(request, now + (MOVING_LEAD_S if moving else 0.0),
                                       self.setpoint_at)
+        return prepared, moving
+
+    def hand_off(self, checked, source: str):
+        """The checked trajectory as the core's goal: (goal, watch, note), or
+        ``TrajectoryRefused`` (``said``: the core has said why)."""
+        node = self.node
+        prepared, moving = checked
         self.count += 1
         final = node.core.kinematics.forward(prepared.final_q)
         goal = Goal(float(final[0]), float(final[1]), f'{source} {self.count}',
@@ -156,11 +183,15 @@ class TrajectoryServer:
             motion = Motion(prepared.trajectory, begin)
         accepted, said = node.command(node.core.goals.follow, goal, motion)
         if not accepted:
-            raise TrajectoryRefused(ErrorCode.INVALID_GOAL, said)
+            error = TrajectoryRefused(ErrorCode.INVALID_GOAL, said)
+            error.said = True
+            raise error
         return goal, TrajectoryWatch(motion, prepared.tolerances), prepared.note
 
     def refused(self, source: str, error: TrajectoryRefused) -> None:
         """Said as a rejected goal is (``~/events``, the error state when idle)."""
+        if getattr(error, 'said', False):
+            return
         self.node.command(self.node.core.goals.reject,
                           f'{source} refused ({error.code.name}): {error.reason}',
                           error.code.name.lower())
@@ -172,19 +203,28 @@ class TrajectoryServer:
         if not msg.points:                 # JTC: an empty trajectory stops and holds
             self.node.command(self.node.core.cancel)
             return
+        request = request_from(msg)
+        self.worker.submit(self.from_topic, request)
+
+    def from_topic(self, request: TrajectoryRequest) -> None:
+        """On the checking thread: checked, then followed (or refused, said)."""
         try:
-            self.start(request_from(msg), 'joint_trajectory')
+            self.hand_off(self.check(request), 'joint_trajectory')
         except TrajectoryRefused as error:
             self.refused('joint_trajectory', error)
+        except Exception as error:
+            self.get_logger().error(f'joint_trajectory failed: {error!r}')
 
     # ------------------------------------------------------------------ the action
 
     async def execute(self, handle):
         result = FollowJointTrajectory.Result()
         try:
-            goal, watch, note = self.start(request_from(handle.request.trajectory,
-                                                        handle.request),
-                                           'follow_joint_trajectory goal')
+            request = request_from(handle.request.trajectory, handle.request)
+            done, checked = await self.in_worker(self.check, request)
+            if not done:
+                raise checked
+            goal, watch, note = self.hand_off(checked, 'follow_joint_trajectory goal')
         except TrajectoryRefused as error:
             self.refused('follow_joint_trajectory goal', error)
             handle.abort()
@@ -199,7 +239,7 @@ class TrajectoryServer:
         if self.active is not None:
             self.finish(self.active, ErrorCode.INVALID_GOAL, 'preempted by a newer goal')
         future = Future()
-        self.active = Active(handle, goal, watch, future, note)
+        self.active = Active(handle, goal, watch, future, note, self.node.core_now_s())
         return await future
 
     def finish(self, active: Active, code: ErrorCode, text: str, cancelled=False) -> None:
@@ -225,15 +265,14 @@ class TrajectoryServer:
             return
         core = self.node.core
         motion = active.watch.motion
+        begun = active.begun_s
         with self.node.lock:
             now = self.node.core_now_s()
             following = (core.setpoints.timeline.last is motion and not core.setpoints.driving
                          and core.state not in STOPPED)
-            state, error = core.state, core.last_error
-            mine = core.goals.queue.current is active.goal
+            said = [e for e in core.events.history if e.level != 'info' and e.time_s >= begun]
+            why = str(said[-1]) if said else f'another goal or command took over ({core.state})'
             estimate = None if core.estimate is None else core.estimate.copy()
-        why = (f'the arm is {state}' + (f': {error}' if error else '')) if (
-            mine or state in STOPPED) else f'another goal or command took over ({state})'
         if active.handle.is_cancel_requested:
             self.stop(motion)
             self.finish(active, ErrorCode.SUCCESSFUL, 'cancelled: braking to rest along its '
