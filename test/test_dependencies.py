@@ -32,6 +32,7 @@ MODULE_KEYS = {
     'nav_msgs': 'nav_msgs',
     'trajectory_msgs': 'trajectory_msgs',
     'control_msgs': 'control_msgs',
+    'action_msgs': 'action_msgs',
     'diagnostic_msgs': 'diagnostic_msgs',
     'visualization_msgs': 'visualization_msgs',
     'numpy': 'python3-numpy',
