@@ -228,3 +228,12 @@ def test_an_arm_on_the_floor_may_leave_it_but_not_come_back(goals):
     with pytest.raises(TrajectoryRefused) as refused:
         goals.prepare(back, 0.0, at_rest(fallen))
     assert refused.value.code == ErrorCode.INVALID_GOAL
+
+
+def test_a_retimed_trajectory_is_never_sooner_than_asked(goals, arm, controller_config):
+    asked = request(('shoulder', 'elbow'), moveit_style(START, (0.9, -0.5), 0.6))
+    prepared = goals.prepare(asked, 0.0, at_rest())
+    assert prepared.note                          # infeasible somewhere as asked ...
+    assert math.isclose(prepared.trajectory.duration_s, 0.6, rel_tol=1e-9)   # ... not sooner
+    limits = TrajectoryLimits.from_config(arm, controller_config)
+    assert check(prepared.trajectory, ArmDynamics(arm), limits).passes

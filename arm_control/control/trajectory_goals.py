@@ -11,7 +11,8 @@ a planned one (``GoalRunner.follow``), or refuses it with a ``FollowJointTraject
   planner's trajectories). A timing they cannot give is refused with where and by how much
   (``trajectory_infeasible_timing: reject``) or retimed (``retime``) to the fastest timing
   along the same points that they can (``time_optimal_trajectory``: corners rounded within
-  free space, as the planner's paths are), else the same spline slowed down uniformly.
+  free space, as the planner's paths are) but never sooner than asked, else the same spline
+  slowed down uniformly.
 
 ``TrajectoryWatch`` then judges the goal each monitor period as JTC does: path tolerances
 until the end, goal tolerances after it within ``goal_time_tolerance``; and it ends the goal
@@ -208,9 +209,17 @@ class TrajectoryGoals:
                 else self.forbidden
             fastest = time_optimal_trajectory(points, self.dynamics, space, self.limits,
                                               start_velocity_rad_s=start_qd, reshape=False)
-            return fastest, 'the fastest timing along its points'
         except TrajectoryError:
-            pass
+            fastest = None
+        if fastest is not None and fastest.duration_s >= spline.duration_s:
+            return fastest, 'the fastest timing along its points'
+        if fastest is not None and not np.any(start_qd):
+            # Never sooner than asked (a client's slow scaling is on purpose): the same
+            # timing slowed uniformly to the duration asked, when that passes too.
+            slower = fastest.scaled(spline.duration_s / fastest.duration_s)
+            if check(slower, self.dynamics, self.limits).passes:
+                return slower, 'the fastest timing along its points, slowed to the time asked'
+            return fastest, 'the fastest timing along its points'
         for factor in SLOWER:
             slower = spline.scaled(factor)
             if check(slower, self.dynamics, self.limits).passes:
