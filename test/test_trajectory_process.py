@@ -4,6 +4,7 @@ a client that speaks as MoveIt's controller manager does -- ``rclpy.action`` on
 ``/controller/joint_trajectory``. Where the arm went is read from the sim's true state."""
 
 import math
+import os
 import time
 
 from action_msgs.msg import GoalStatus
@@ -12,8 +13,9 @@ from builtin_interfaces.msg import Duration
 from control_msgs.action import FollowJointTrajectory
 import numpy as np
 import pytest
-from rclpy.action import ActionClient
+from rclpy.action import ActionClient, get_action_names_and_types
 from ros_harness import stamp_s
+from sensor_msgs.msg import JointState
 from test_joint_trajectory import moveit_style
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -161,3 +163,26 @@ def test_the_topic_moves_the_arm_and_an_empty_message_stops_it(rig, at_start):
     assert rig.wait_still(timeout_s=3.0)
     assert np.max(np.abs(rig.true_q() - (0.9, -0.5))) > 10 * DEG
     assert math.isfinite(rig.true_q()[0])
+
+
+def test_without_control_msgs_the_action_is_off_said_once_and_the_topic_works(
+        launch, probe, tmp_path):
+    hidden = tmp_path / 'hide' / 'control_msgs'
+    hidden.mkdir(parents=True)
+    (hidden / '__init__.py').write_text("raise ImportError('control_msgs hidden by the test')\n")
+    environment = {'PYTHONPATH': f'{hidden.parent}:{os.environ.get("PYTHONPATH", "")}'}
+    launch('sim')
+    controller = launch('controller', environment=environment)
+    truth = probe.collect(JointState, '/sim/ground_truth')
+    publisher = probe.node.create_publisher(JointTrajectory, '/controller/joint_trajectory',
+                                            COMMANDS)
+    assert probe.spin_until(lambda: publisher.get_subscription_count() > 0, 30.0)
+    probe.spin_for(3.0)                               # the controller takes the arm
+    publisher.publish(trajectory(('shoulder', 'elbow'), [(2.0, (1.3, -1.2))]))
+
+    def there():
+        return truth and np.max(np.abs(np.subtract(truth[-1].position, (1.3, -1.2)))) < 2 * DEG
+    assert probe.spin_until(there, 10.0), controller.output()
+    names = [name for name, _ in get_action_names_and_types(probe.node)]
+    assert ACTION not in names
+    assert controller.output().count('control_msgs is not installed') == 1
