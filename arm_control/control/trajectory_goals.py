@@ -156,8 +156,7 @@ class TrajectoryGoals:
             raise TrajectoryRefused(ErrorCode.INVALID_GOAL, reason)
         retimed, how = self.retime(spline, qd)
         self.check_space(retimed, knots.times_s, math.nan)
-        note = (f'retimed ({reason}): {how}, {retimed.duration_s:.3f} s instead of '
-                f'{spline.duration_s:.3f} s')
+        note = f'retimed ({reason}): {how}'
         return PreparedTrajectory(retimed, begin_s, tolerances, note, spline.q[-1])
 
     def shortfall(self, verdict) -> str:
@@ -211,19 +210,24 @@ class TrajectoryGoals:
                                               start_velocity_rad_s=start_qd, reshape=False)
         except TrajectoryError:
             fastest = None
-        if fastest is not None and fastest.duration_s >= spline.duration_s:
-            return fastest, 'the fastest timing along its points'
-        if fastest is not None and not np.any(start_qd):
+        asked = spline.duration_s
+        if fastest is not None:
+            said = (f'the fastest timing along its points, {fastest.duration_s:.3f} s instead '
+                    f'of {asked:.3f} s')
+            if fastest.duration_s >= asked or np.any(start_qd):
+                return fastest, said
             # Never sooner than asked (a client's slow scaling is on purpose): the same
             # timing slowed uniformly to the duration asked, when that passes too.
-            slower = fastest.scaled(spline.duration_s / fastest.duration_s)
+            slower = fastest.scaled(asked / fastest.duration_s)
             if check(slower, self.dynamics, self.limits).passes:
-                return slower, 'the fastest timing along its points, slowed to the time asked'
-            return fastest, 'the fastest timing along its points'
+                return slower, (f'the fastest timing along its points, slowed to the '
+                                f'{asked:.3f} s asked')
+            return fastest, said
         for factor in SLOWER:
             slower = spline.scaled(factor)
             if check(slower, self.dynamics, self.limits).passes:
-                return slower, f'{factor:g} times slower'
+                return slower, (f'its own timing {factor:g} times slower, '
+                                f'{slower.duration_s:.3f} s')
         raise TrajectoryRefused(ErrorCode.INVALID_GOAL,
                                 'the motors cannot give its timing, nor one 6 times slower')
 
