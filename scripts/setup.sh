@@ -20,17 +20,19 @@ fi
 # control_msgs (FollowJointTrajectory) ships in no wheel: build it into the venv from the
 # shared sources beside the clone (../shared), once; the controller runs without it.
 CONTROL_MSGS="$ROOT/../shared/control-msgs/install.sh"
-if [ -x "$CONTROL_MSGS" ] && ! "$VENV/bin/python" -c 'import control_msgs.action' 2>/dev/null; then
+if [ -f "$CONTROL_MSGS" ] && ! "$VENV/bin/python" -c 'import control_msgs.action' 2>/dev/null; then
   missing=$(for tool in cmake g++; do command -v $tool >/dev/null || echo $tool; done)
   if [ -n "$missing" ] || ! python3 -c 'import sysconfig, os, sys; sys.exit(not os.path.exists(
       os.path.join(sysconfig.get_paths()["include"], "Python.h")))'; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
       echo "== installing cmake, g++ and python3-dev to build control_msgs"
-      apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq cmake g++ python3-dev >/dev/null
+      { apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+          apt-get install -y -qq cmake g++ python3-dev >/dev/null; } ||
+        echo "could not install cmake, g++ and python3-dev" >&2
     fi
   fi
   echo "== building control_msgs into $VENV"
-  "$CONTROL_MSGS" "$VENV" || echo "control_msgs not built: the controller runs without its action" >&2
+  bash "$CONTROL_MSGS" "$VENV" || echo "control_msgs not built: the controller runs without its action" >&2
 fi
 # shellcheck disable=SC1091
 source "$VENV/bin/activate"
