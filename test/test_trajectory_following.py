@@ -85,3 +85,17 @@ def test_a_push_off_the_trajectory_leaves_it_without_planning_it_again(arm, cont
     rig.run(1.0)
     assert rig.core.setpoints.timeline.last is not motion
     assert not rig.core.pending_goals()
+
+
+def test_a_trajectory_is_refused_while_a_driver_is_in_charge(arm, controller_config, goals):
+    rig = Rig(arm, controller_config)
+    settled(rig)
+    rig.core.driver_command(rig.now, 0.1, 0.0)
+    rig.run(0.1)
+    assert rig.core.state == ArmState.DRIVER
+    core = rig.core
+    prepared = goals.prepare(request(('shoulder', 'elbow'), [(2.0, (1.2, -1.0))]), rig.now,
+                             lambda t: core._reference(t))
+    accepted, _ = core.goals.follow(rig.now, Goal(1.0, 1.0, 'trajectory', replan=False),
+                                    Motion(prepared.trajectory, prepared.begin_s))
+    assert not accepted and core.state == ArmState.DRIVER

@@ -123,12 +123,14 @@ class GoalRunner:
         """A trajectory given whole (a ROS client's, checked: ``trajectory_goals``) as the
         current goal, in place of the queue and any goal in hand: its motion takes over at
         its ``begin_s`` and is tracked, left and reached as a planned one's."""
-        if not self.machine.can(T.GOAL):
-            return self.reject(now_s, f'{goal.label} rejected: the arm is {self.machine.state}',
-                               str(self.machine.state))
+        state = self.machine.state
+        if not self.machine.can(T.GOAL) or state == S.DRIVER:
+            # A driver's setpoint is extrapolated, not scheduled: the trajectory was checked
+            # from a state the arm would not be in.
+            why = 'a driver is in charge (call cancel first)' if state == S.DRIVER else \
+                f'the arm is {state}'
+            return self.reject(now_s, f'{goal.label} rejected: {why}', str(state))
         dropped = self.drop()
-        if self.setpoints.driving:
-            self.setpoints.brake(now_s)
         self.queue.start(goal)
         self.plans.start(now_s)
         self.counts['started'] += 1
