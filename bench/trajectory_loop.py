@@ -59,6 +59,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--goals', type=int, default=8)
     parser.add_argument('--domain', type=int, default=92)
+    parser.add_argument('--write-docs', action='store_true')
     args = parser.parse_args()
     probe = Probe(args.domain, 'trajectory_loop')
     rig = ArmRig(args.domain, probe, Path(tempfile.mkdtemp(prefix='arm_trajectory_loop_')))
@@ -95,7 +96,7 @@ def main():
         probe.close()
     table = '\n'.join(lines)
     print(table)
-    if '--write-docs' in sys.argv:
+    if args.write_docs:
         print(write('trajectory_loop', 'Checking client trajectories beside the control loop '
                     '(through ROS)', 'python bench/trajectory_loop.py ' +
                     ' '.join(sys.argv[1:]), table))
