@@ -122,6 +122,14 @@ class TrajectoryServer:
     def get_logger(self):
         return self.node.get_logger()
 
+    def command(self, call, *args):
+        """``call(now, *args)`` on the core under the node's lock, from any thread (none of
+        these cuts the power); what it said is published by the executor."""
+        with self.node.lock:
+            result = call(self.node.core_now_s(), *args)
+        self.node.outputs.trigger()
+        return result
+
     # ------------------------------------------------------------------ checks, hand-off
 
     def setpoint_at(self, t_s: float):
@@ -181,7 +189,7 @@ class TrajectoryServer:
                         'where it was checked from: send it again'))
                 begin = now                           # from rest: it starts now
             motion = Motion(prepared.trajectory, begin)
-        accepted, said = node.command(node.core.goals.follow, goal, motion)
+        accepted, said = self.command(node.core.goals.follow, goal, motion)
         if not accepted:
             error = TrajectoryRefused(ErrorCode.INVALID_GOAL, said)
             error.said = True
@@ -192,16 +200,16 @@ class TrajectoryServer:
         """Said as a rejected goal is (``~/events``, the error state when idle)."""
         if getattr(error, 'said', False):
             return
-        self.node.command(self.node.core.goals.reject,
-                          f'{source} refused ({error.code.name}): {error.reason}',
-                          error.code.name.lower())
+        self.command(self.node.core.goals.reject,
+                     f'{source} refused ({error.code.name}): {error.reason}',
+                     error.code.name.lower())
 
     # ------------------------------------------------------------------ the topic
 
     @guarded
     def on_topic(self, msg: JointTrajectory) -> None:
         if not msg.points:                 # JTC: an empty trajectory stops and holds
-            self.node.command(self.node.core.cancel)
+            self.command(self.node.core.cancel)
             return
         request = request_from(msg)
         self.worker.submit(self.from_topic, request)
@@ -294,7 +302,7 @@ class TrajectoryServer:
         with self.node.lock:
             ours = self.node.core.setpoints.timeline.last is motion
         if ours:
-            self.node.command(self.node.core.cancel)
+            self.command(self.node.core.cancel)
 
     def feedback(self, active: Active, now: float, estimate) -> None:
         q, qd, qdd = active.watch.motion.sample(now)
