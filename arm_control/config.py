@@ -178,8 +178,8 @@ def _catalogue_motor(key: str, motor_name: str, motors: dict) -> MotorDatasheet:
         raise ParameterError(
             f"parameter '{key}' = {motor_name!r}: not a motor of motors.names "
             f"({', '.join(sorted(motors))}); WPILib's DCMotor catalogue needs robotpy-wpimath "
-            f'({error.name or error}): pip install robotpy-wpimath, or give the motor\'s '
-            'datasheet under motors.names') from None
+            f'({error.name or error}): pip install robotpy-wpimath, or give the motor datasheet '
+            'under motors.names') from None
     if motor_name not in catalogue:
         raise ParameterError(
             f"parameter '{key}' = {motor_name!r}: not a motor of motors.names nor of "
