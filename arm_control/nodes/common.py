@@ -220,7 +220,8 @@ def _note_stop(signum, frame):
 def run(node_class, args=None) -> int:
     """The Jazzy main() shape: construct, spin, clean up on every exit path.
 
-    A bad parameter stops the node at start with the parameter named (exit code 2).
+    A bad parameter stops the node at start with the parameter named (exit code 2). A node
+    that ends by itself may say how it went in ``exit_code``.
     """
     use_udp_transport()
     # Python's handler for SIGINT, marking the stop: rclpy's, installed by init, runs first
@@ -260,4 +261,4 @@ def run(node_class, args=None) -> int:
                 shutdown()
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return getattr(node, 'exit_code', 0)
