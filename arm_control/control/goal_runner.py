@@ -153,7 +153,7 @@ class GoalRunner:
                 and isinstance(last, (StraightStop, StoppingMotion)):
             # Braking to rest (cancelled, off its plan, back from a stall, out of driver
             # mode), or at rest since: none from the moving arm, so one from where it comes
-            # to rest. A goal sent just after a cancel had failed from the braking arm.
+            # to rest, so that a goal sent just after a cancel is not lost.
             self.ask(now_s, timed.request.goal, rest_q, max(last.end_s - now_s, 0.0) + 1e-6)
         elif verdict == 'fail':
             self.fail(now_s, value)

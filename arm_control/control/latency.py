@@ -9,8 +9,8 @@ import statistics
 
 # A command's compute is taken as the median of this many ticks ...
 COMPUTE_WINDOW = 25
-# ... and its way to the motors as this: the sim hears a command 0.8-1.5 ms after it was
-# sent (its diagnostics' "command transit median", each second of the suite on one host).
+# ... and its way to the motors as this: about a millisecond on one host (the sim's
+# diagnostics report the median as "command transit median").
 COMMAND_TRANSIT_S = 0.001
 
 

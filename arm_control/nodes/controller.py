@@ -53,11 +53,8 @@ from arm_control.parameters import ParameterError
 
 PLANNER_POLL_S = 0.05             # how often to look whether the planner is there
 # The executor's thread (messages, services) at SCHED_FIFO this low when the loop is at real
-# time: above every normal process, below the loop. At normal priority, a busy machine
-# preempts it while it holds Python's lock, and the loop waits for the lock: in a flood of
-# goals under two busy loops the loop stalled for 149-396 ms (its own worst period) and the
-# arm was e-stopped on its tracking error in 2 of 3 runs; at FIFO 1, 27-166 ms over 9 runs,
-# and one e-stop, after the sim had gone 0.1 s without a command.
+# time: above every normal process, below the loop. At normal priority a busy machine can
+# preempt it while it holds Python's lock, and the loop would then wait for the lock.
 EXECUTOR_PRIORITY = 1
 SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V command to arrive
 # A reading is timed at its stamp when that is at most this long before its arrival, and
@@ -182,11 +179,10 @@ class ControllerNode(Node):
                 now - latest[1] <= self.config.joint_state_timeout_s else missing
         encoder = fresh(self.encoders, (math.nan, math.nan))
         bus, supply_current = fresh(self.bus, (math.nan, math.nan))
-        # Taken at its stamp, when the sensors were read: timed at its arrival (4 ms later at
-        # the median) the estimate lagged the arm by that much motion, and the feedback drove
-        # the elbow up to 1.5 deg ahead on a 0.2 s hop (past its goal in 5 of 24 runs, 40-60 ms
-        # more to settle; 0 of 24 at the stamps). In simulated time the stamp is the clock's,
-        # which may not have reached it yet.
+        # Taken at its stamp, when the sensors were read: timed at its arrival the estimate
+        # would lag the arm by the transit's worth of motion, and the feedback, seeing the arm
+        # behind, would drive it ahead. In simulated time the stamp is the clock's, which may
+        # not have reached it yet.
         trusted = 0.0 <= age_s <= STAMP_TRUSTED_S or self.loop.simulated()
         taken = stamp if trusted else now
         self.reading = (SensorReading(tuple(position), tuple(velocity), tuple(encoder),
