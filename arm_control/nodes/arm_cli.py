@@ -5,13 +5,13 @@
     arm estop | reset | cancel  # the controller's Trigger services, with their answer
     arm state                   # the state machine's state and the joint angles
 
-A goal waits (and says so once) until the controller is there and its own client reaches the
-planner, since a goal sent before is rejected; then it is sent and the controller's answer
-on ``controller/events`` is printed. ``--reach`` waits on for ``goal_reached``. Every wait is
-bounded by ``--timeout``. Exit code: 0 done, 1 refused (the reason printed), 3 no answer in
-time. The same tool is ``ros2 run arm_control arm ...`` and, without the ros2 CLI,
-``scripts/arm ...`` from the two-command set-up. Names are relative: ``--ros-args -r
-__ns:=/arm1`` talks to the arm in /arm1.
+A goal waits (and says so once) until the controller hears it and will tell its answer; then
+it is sent and the controller's answer on ``controller/events`` is printed (a goal sent
+before the controller has found its planner is queued until it has). ``--reach`` waits on
+for ``goal_reached``. Every wait is bounded by ``--timeout``. Exit code: 0 done, 1 refused
+(the reason printed), 3 no answer in time. The same tool is ``ros2 run arm_control arm ...``
+and, without the ros2 CLI, ``scripts/arm ...`` from the two-command set-up. Names are
+relative: ``--ros-args -r __ns:=/arm1`` talks to the arm in /arm1.
 """
 
 import argparse
@@ -19,7 +19,6 @@ import math
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 import rclpy
 from rclpy.node import Node
@@ -30,8 +29,7 @@ from std_srvs.srv import Trigger
 
 from arm_control.config import FRAME_ID
 from arm_control.control.events import EventKind, parse_event
-from arm_control.nodes.common import (COMMANDS, controller_sees_planner, LATCHED,
-                                      STATE_STREAM, use_udp_transport)
+from arm_control.nodes.common import COMMANDS, LATCHED, STATE_STREAM, use_udp_transport
 
 DONE, REFUSED, NO_ANSWER = 0, 1, 3
 ANSWERS = {str(EventKind.GOAL_QUEUED): DONE, str(EventKind.GOAL_ACCEPTED): DONE,
@@ -40,7 +38,7 @@ ENDS = {str(EventKind.GOAL_REACHED): DONE, str(EventKind.GOAL_FAILED): REFUSED,
         str(EventKind.CANCELLED): REFUSED, str(EventKind.ESTOP): REFUSED,
         str(EventKind.CONTROL_FAILED): REFUSED}
 EVENTS_QOS = 1000
-QUIET_S = 1.5    # discovery and the controller's 1 Hz diagnostics: no need to say it
+QUIET_S = 1.5    # DDS discovery takes about this: no need to say it
 
 
 def parse(argv) -> argparse.Namespace:
@@ -62,13 +60,11 @@ def parse(argv) -> argparse.Namespace:
 
 
 class ArmClient(Node):
-    """What the tool hears: the arm's state, the controller's events and its view of the
-    planner."""
+    """What the tool hears: the arm's state, its joints and the controller's events."""
 
     def __init__(self):
         super().__init__('arm_cli', start_parameter_services=False)
-        self.controller = f"{self.get_namespace().rstrip('/')}/controller"
-        self.state, self.joints, self.planner_seen = None, None, False
+        self.state, self.joints = None, None
         self.events = []
         self.goal_pub = self.create_publisher(PointStamped, 'goal_point', COMMANDS)
         self.preset_pub = self.create_publisher(String, 'goal_preset', COMMANDS)
@@ -76,7 +72,6 @@ class ArmClient(Node):
             String, 'controller/events', lambda msg: self.events.append(msg.data), EVENTS_QOS)
         self.create_subscription(String, 'arm_state', self.on_state, LATCHED)
         self.create_subscription(JointState, 'joint_states', self.on_joints, STATE_STREAM)
-        self.create_subscription(DiagnosticArray, '/diagnostics', self.on_diagnostics, 10)
 
     def on_state(self, msg: String) -> None:
         self.state = msg.data
@@ -84,30 +79,23 @@ class ArmClient(Node):
     def on_joints(self, msg: JointState) -> None:
         self.joints = dict(zip(msg.name, msg.position))
 
-    def on_diagnostics(self, msg: DiagnosticArray) -> None:
-        seen = controller_sees_planner(msg, self.controller)
-        if seen is not None:
-            self.planner_seen = seen
-
     def spin_until(self, condition, deadline: float) -> bool:
         while not condition() and time.monotonic() < deadline:
             rclpy.spin_once(self, timeout_sec=0.05)
         return bool(condition())
 
     def ready_for_goals(self) -> bool:
-        """The controller hears our goals and tells us its events, and reaches the planner."""
+        """The controller hears our goals and tells us its events."""
         return (self.goal_pub.get_subscription_count() > 0
                 and self.preset_pub.get_subscription_count() > 0
-                and self.events_sub.get_publisher_count() > 0 and self.planner_seen)
+                and self.events_sub.get_publisher_count() > 0)
 
 
 def send_goal(node: ArmClient, args, deadline: float) -> int:
     if not node.spin_until(node.ready_for_goals, min(deadline, time.monotonic() + QUIET_S)):
-        print('waiting for the controller and its planner ...', flush=True)
+        print('waiting for the controller ...', flush=True)
         if not node.spin_until(node.ready_for_goals, deadline):
-            missing = ('the controller' if node.goal_pub.get_subscription_count() == 0
-                       else 'the planner (the controller does not reach it yet)')
-            print(f'no answer: {missing} did not appear within {args.timeout:g} s '
+            print(f'no answer: the controller did not appear within {args.timeout:g} s '
                   '(is the arm running on this ROS_DOMAIN_ID?)')
             return NO_ANSWER
     node.events.clear()
