@@ -68,3 +68,14 @@ def test_scripts_arm_runs_the_same_tool_without_the_ros2_cli(domain):
                             capture_output=True, text=True, env=ros_environment(domain),
                             timeout=60)
     assert result.returncode == NO_ANSWER, result.stdout + result.stderr
+
+
+def test_the_command_line_as_a_user_types_it():
+    from arm_control.nodes.arm_cli import DEFAULT_TIMEOUT_S, parse
+    goal = parse(['goal', '-1.0', '1.0', '--reach'])
+    assert (goal.command, goal.x, goal.y, goal.reach, goal.timeout) == \
+        ('goal', -1.0, 1.0, True, DEFAULT_TIMEOUT_S)
+    assert parse(['--timeout', '3', 'state']).timeout == parse(['state', '--timeout', '3']).timeout
+    assert parse(['preset', 'high_score']).name == 'high_score'
+    with pytest.raises(SystemExit):
+        parse(['goal', '1.0'])                          # a point needs both coordinates

@@ -38,25 +38,33 @@ ENDS = {str(EventKind.GOAL_REACHED): DONE, str(EventKind.GOAL_FAILED): REFUSED,
         str(EventKind.CANCELLED): REFUSED, str(EventKind.ESTOP): REFUSED,
         str(EventKind.CONTROL_FAILED): REFUSED}
 EVENTS_QOS = 1000
+DEFAULT_TIMEOUT_S = 20.0
 QUIET_S = 1.5    # DDS discovery takes about this: no need to say it
 
 
 def parse(argv) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog='arm', description=__doc__.split('\n\n')[0])
-    parser.add_argument('--timeout', type=float, default=20.0,
-                        help='seconds to wait for the arm and its answer (default 20)')
+    """The command; ``--timeout`` before or after it."""
+    timeout = argparse.ArgumentParser(add_help=False)
+    timeout.add_argument('--timeout', type=float, default=argparse.SUPPRESS,
+                         help=f'seconds to wait for the arm and its answer '
+                              f'(default {DEFAULT_TIMEOUT_S:g})')
+    parser = argparse.ArgumentParser(prog='arm', description=__doc__.split('\n\n')[0],
+                                     parents=[timeout])
     commands = parser.add_subparsers(dest='command', required=True)
-    goal = commands.add_parser('goal', help='a point in arm_base (m)')
+    goal = commands.add_parser('goal', help='a point in arm_base (m)', parents=[timeout])
     goal.add_argument('x', type=float)
     goal.add_argument('y', type=float)
-    preset = commands.add_parser('preset', help='a preset by name')
+    preset = commands.add_parser('preset', help='a preset by name', parents=[timeout])
     preset.add_argument('name')
     for sub in (goal, preset):
         sub.add_argument('--reach', action='store_true', help='wait until the goal is reached')
     for name in ('estop', 'reset', 'cancel'):
-        commands.add_parser(name, help=f'call controller/{name}')
-    commands.add_parser('state', help="the controller's state and the joint angles")
-    return parser.parse_args(argv)
+        commands.add_parser(name, help=f'call controller/{name}', parents=[timeout])
+    commands.add_parser('state', help="the controller's state and the joint angles",
+                        parents=[timeout])
+    args = parser.parse_args(argv)
+    args.timeout = getattr(args, 'timeout', DEFAULT_TIMEOUT_S)
+    return args
 
 
 class ArmClient(Node):
