@@ -148,7 +148,7 @@ def faster_shape(base: BlendedPath, shape, dynamics: ArmDynamics, limits: Trajec
     """(``shape``, or None when ``base`` unbent is as fast; the (σ, sag) of the bus the one
     kept leaves, or None), both timed exactly on the bus's grid (``BUS_GRID``, the blends cut
     finely) under their own bus: on a path of many corners the search's few stages can
-    misjudge (a bend it rated faster took 4 % longer than the path itself)."""
+    misjudge, rating faster a bend that is slower than the path itself."""
     if shape is None or not np.any(shape):
         return None, None
     timed = []
