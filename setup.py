@@ -35,6 +35,7 @@ setup(
             'frc_bridge = arm_control.nodes.frc_bridge:main',
             'frc_robot_sim = arm_control.frc.robot_sim:main',
             'sysid = arm_control.nodes.sysid:main',
+            'arm = arm_control.nodes.arm_cli:entry',
         ],
     },
 )

@@ -127,9 +127,7 @@ class ArmConfig:
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'ArmConfig':
         read = Reader(params)
-        motors = dict(wpilib_motors())
-        for name in read.strings('motors.names'):
-            motors[name] = _read_datasheet(read, name)
+        motors = {name: _read_datasheet(read, name) for name in read.strings('motors.names')}
         joints = [_read_joint(read, name, motors) for name in JOINT_NAMES]
         battery = BatteryConfig(
             nominal_voltage=read.positive('battery.nominal_voltage'),
@@ -172,12 +170,26 @@ def _read_datasheet(read: Reader, name: str) -> MotorDatasheet:
     return MotorDatasheet(name, stall_torque, stall_current, free_rpm, free_current, volts)
 
 
+def _catalogue_motor(key: str, motor_name: str, motors: dict) -> MotorDatasheet:
+    """A motor the file does not give: WPILib's catalogue, needed (and imported) only then."""
+    try:
+        catalogue = wpilib_motors()
+    except ImportError as error:
+        raise ParameterError(
+            f"parameter '{key}' = {motor_name!r}: not a motor of motors.names "
+            f"({', '.join(sorted(motors))}); WPILib's DCMotor catalogue needs robotpy-wpimath "
+            f'({error.name or error}): pip install robotpy-wpimath, or give the motor datasheet '
+            'under motors.names') from None
+    if motor_name not in catalogue:
+        raise ParameterError(
+            f"parameter '{key}' = {motor_name!r}: not a motor of motors.names nor of "
+            f"WPILib's DCMotor catalogue ({', '.join(sorted({*motors, *catalogue}))})")
+    return catalogue[motor_name]
+
+
 def _read_joint(read: Reader, name: str, motors: dict) -> JointConfig:
     motor_name = read.text(f'{name}.motor')
-    if motor_name not in motors:
-        raise ParameterError(
-            f"parameter '{name}.motor' = {motor_name!r}: not a motor of motors.names nor of "
-            f"WPILib's DCMotor catalogue ({', '.join(sorted(motors))})")
+    motor = motors.get(motor_name) or _catalogue_motor(f'{name}.motor', motor_name, motors)
     current_limit = read.nonnegative(f'{name}.current_limit_a')
     joint = JointConfig(
         name=name,
@@ -185,7 +197,7 @@ def _read_joint(read: Reader, name: str, motors: dict) -> JointConfig:
         mass_kg=read.nonnegative(f'{name}.mass_kg'),
         com_from_joint_m=read.nonnegative(f'{name}.com_from_joint_m'),
         inertia_about_com_kgm2=read.nonnegative(f'{name}.inertia_about_com_kgm2'),
-        motor=motors[motor_name],
+        motor=motor,
         motor_count=read.integer(f'{name}.motor_count', low=1),
         gear_ratio=read.positive(f'{name}.gear_ratio'),
         current_limit_a=current_limit if current_limit > 0.0 else math.inf,

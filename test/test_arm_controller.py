@@ -248,6 +248,22 @@ def test_the_planner_coming_and_going_is_said_once_each_and_named_in_a_failure(
     assert 'plan_path' in failure.message              # the missing service, by name
 
 
+def test_a_goal_sent_before_the_planner_first_appears_waits_for_it_and_is_carried_out(
+        arm, controller_config, planner):
+    """At start-up the controller's client may find the planner seconds after the first goal:
+    that goal is kept, said to wait once, and planned when the planner comes, not failed."""
+    rig = Rig(arm, controller_config, planner)
+    rig.core.on_planner_available(rig.now, False)
+    rig.core.submit_preset(rig.now, 'mid_score')
+    rig.run(controller_config.planner_timeout_s + 0.5)
+    assert rig.core.state == ArmState.WAITING
+    assert Kind.GOAL_FAILED not in kinds(rig.core)
+    assert np.max(np.abs(rig.true_q - START)) < 0.5 * DEG       # nothing planned, no move
+    rig.core.on_planner_available(rig.now, True)
+    assert rig.run(10.0, lambda: reached(rig.core) == 1)
+    assert kinds(rig.core).count(Kind.PLANNER_WAITING) == 1
+
+
 def test_a_late_answer_to_a_cancelled_request_is_ignored(arm, controller_config, planner):
     rig = Rig(arm, controller_config, planner=None)
     rig.step()

@@ -80,6 +80,26 @@ def test_the_path_arrives_as_tool_poses_and_is_kept_as_configurations(model, kin
     assert model.on_path([]) is None and model.path_rad == ()
 
 
+def test_the_path_shown_is_the_arms_last_move_not_the_planning_ahead(model, kinematics):
+    """Holding, the controller asks for the paths between presets and the planner publishes
+    them; the picture keeps the path of the move just made."""
+    move = [(2.5, -0.5), (2.0, -1.0), (1.5708, -1.5708)]
+    ahead = [(0.3, 2.4), (1.0, 1.0), (2.8, -1.2)]
+    model.on_joint_state(move[0], 0.0)
+    model.on_state('planning')
+    model.on_path([kinematics.tool_pose(q) for q in move])
+    model.on_state('tracking')
+    model.on_joint_state(move[-1], 1.0)
+    model.on_state('holding')
+    model.on_path([kinematics.tool_pose(q) for q in ahead])
+    assert np.allclose(model.scene(1.0).path_rad, move, atol=1e-9)
+    # The next goal's path may come before its state does: taken when it starts at the arm.
+    onward = [move[-1], (2.0, -1.2)]
+    model.on_path([kinematics.tool_pose(q) for q in onward])
+    model.on_state('planning')
+    assert np.allclose(model.scene(1.1).path_rad, onward, atol=1e-9)
+
+
 def test_viewer_parameters_from_the_file():
     params = read_parameter_file(Path(__file__).resolve().parents[1] / 'config' / 'arm.yaml',
                                  'viewer')

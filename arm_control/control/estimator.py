@@ -46,8 +46,8 @@ MAX_SUBSTEP_S = 0.005
 RESET_GATE_SIGMA = 8.0
 # Encoder zeros drift as a random walk of this (rad/√s). The lash error is not white: it
 # sits at ±lash/2 while a joint moves one way and flips when it reverses. A zero free to
-# wander this much follows that slow part (measured: position RMS 0.25-0.3 of the raw
-# potentiometers' at 4e-3, 0.7 at 1e-4) and heals a small undetected re-zero within seconds.
+# wander this much follows that slow part (test_estimator.py: the estimate beats the raw
+# potentiometers) and heals a small undetected re-zero within seconds.
 ZERO_DRIFT_RAD_PER_SQRT_S = 4e-3
 # Floor on every sensor's noise, so that S stays invertible with ideal sensors configured.
 MIN_NOISE = 1e-6

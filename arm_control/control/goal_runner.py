@@ -44,6 +44,7 @@ class GoalRunner:
         self.last_error = ''
         self.counts = dict.fromkeys(('queued', 'started', 'rejected', 'reached', 'failed'), 0)
         self.planner_available: Optional[bool] = None    # as the node's client sees it
+        self.planner_ever_seen = False
         self.latency_s: dict[str, float] = {}             # of the last goal taken: where ...
 
     # ------------------------------------------------------------------ goals in
@@ -65,13 +66,13 @@ class GoalRunner:
         if preempt:
             dropped = self.drop()
             extra = f'; {dropped} earlier goals dropped' if dropped else ''
-            if self.machine.can(T.GOAL):
+            if self.machine.can(T.GOAL) and not self.waiting_for_planner:
                 self.start(now_s, goal, rest_q)
                 return self._accept(now_s, Kind.GOAL_ACCEPTED,
                                     f'goal {goal.label} accepted{note}: going there now{extra}')
             self.queue.append(goal)
             return self._accept(now_s, Kind.GOAL_ACCEPTED,
-                                f'goal {goal.label} accepted{note}: next{extra}')
+                                f'goal {goal.label} accepted{note}: next{extra}{self._wait()}')
         if self.queue.full:
             return self.reject(now_s, f'goal {goal.label} rejected: the queue is full '
                                       f'({self.config.goal_queue_size} goals waiting); the '
@@ -79,7 +80,8 @@ class GoalRunner:
         self.queue.append(goal)
         self.counts['queued'] += 1
         said = self._accept(now_s, Kind.GOAL_QUEUED, f'goal {goal.label} queued{note} '
-                                                     f'({len(self.queue.waiting)} waiting)')
+                                                     f'({len(self.queue.waiting)} waiting)'
+                                                     f'{self._wait()}')
         if self._ready_for_next(now_s):     # planned now, not half a period later on average
             self.start(now_s, self.queue.start_next(), rest_q, from_queue=True)
         return said
@@ -176,7 +178,7 @@ class GoalRunner:
                 and isinstance(last, (StraightStop, StoppingMotion)):
             # Braking to rest (cancelled, off its plan, back from a stall, out of driver
             # mode), or at rest since: none from the moving arm, so one from where it comes
-            # to rest. A goal sent just after a cancel had failed from the braking arm.
+            # to rest, so that a goal sent just after a cancel is not lost.
             self.ask(now_s, timed.request.goal, rest_q, max(last.end_s - now_s, 0.0) + 1e-6)
         elif verdict == 'fail':
             self.fail(now_s, value)
@@ -231,11 +233,13 @@ class GoalRunner:
         self.events.say(now_s, Kind.GOAL_FAILED, 'warning', self.last_error)
 
     def planner_seen(self, now_s: float, available: bool) -> None:
-        """Say when the planner comes or goes: a goal sent while it is away fails at its
-        planner timeout, and the reason should already be on record."""
+        """Say when the planner comes or goes: a goal sent before it first comes waits for it
+        in the queue; one sent while it is away later fails at its planner timeout, and the
+        reason should already be on record."""
         if available == self.planner_available:
             return
         if available:
+            self.planner_ever_seen = True
             self.events.say(now_s, Kind.PLANNER_AVAILABLE, 'info',
                             'the planner (plan_path) is available')
         elif self.planner_available is None:
@@ -259,11 +263,22 @@ class GoalRunner:
         if self._ready_for_next(now_s):
             self.start(now_s, self.queue.start_next(), estimate[:2], from_queue=True)
 
+    @property
+    def waiting_for_planner(self) -> bool:
+        """At start-up, until the node's client has found the planner: goals are kept in the
+        queue, not planned (they would fail at the planner timeout). A planner that was there
+        and is gone is different: its goals fail, with the reason, until it is back."""
+        return self.planner_available is False and not self.planner_ever_seen
+
+    def _wait(self) -> str:
+        return '; planned once the planner is up' if self.waiting_for_planner else ''
+
     def _ready_for_next(self, now_s: float) -> bool:
         """A goal waits and the arm is idle: waiting, after an error, or held past the dwell."""
         state = self.machine.state
-        return bool(self.queue.waiting) and (state in (S.WAITING, S.ERROR) or (
-            state == S.HOLDING and now_s >= self.arrived_s + self.config.dwell_s))
+        return bool(self.queue.waiting) and not self.waiting_for_planner and (
+            state in (S.WAITING, S.ERROR) or (
+                state == S.HOLDING and now_s >= self.arrived_s + self.config.dwell_s))
 
     def _arrived(self, now_s: float, estimate) -> bool:
         """Done moving, both joints within tolerance of the goal and nearly still."""

@@ -9,8 +9,8 @@ import statistics
 
 # A command's compute is taken as the median of this many ticks ...
 COMPUTE_WINDOW = 25
-# ... and its way to the motors as this: the sim hears a command 0.8-1.5 ms after it was
-# sent (its diagnostics' "command transit median", each second of the suite on one host).
+# ... and its way to the motors as this: about a millisecond on one host (the sim's
+# diagnostics report the median as "command transit median").
 COMMAND_TRANSIT_S = 0.001
 
 
@@ -18,10 +18,8 @@ class CommandDelay:
     """How long after a tick begins its command acts: the tick's compute up to the publish
     (the median of the last ``COMPUTE_WINDOW``) and the command's transit, at most a period.
     The controller computes each command for that instant -- the state predicted to it, the
-    trajectory sampled there. In one process, commands acting 10 ms late made "mid → stow"
-    settle 0.54-0.59 s after its goal instead of 0.46-0.50 s; computed for when they act,
-    0.47 s. Through ROS, during a move, a tick's command went out after 3.7 ms of CPU at the
-    median (6.1 ms at p90)."""
+    trajectory sampled there -- so that a command that acts late does not leave the arm behind
+    its plan and overshooting as it catches up (``test_latency.py``)."""
 
     def __init__(self, period_s: float):
         self.period_s = period_s

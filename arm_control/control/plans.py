@@ -345,7 +345,7 @@ class PresetAnswers:
     """The planner node's answers between presets, worked out before they are asked for, as
     6328 keeps its preset-to-preset trajectories: a robot goes from preset to preset, and its
     arm rests on the very configuration the last answer ended on, so the next goal from there
-    finds its answer ready instead of searching (up to 40 ms on the FRC robot's world).
+    finds its answer ready instead of searching (tens of ms on a robot's world).
 
     ``pending`` lists what is left to work out (each preset branch as a start, toward every
     other preset), ``prepare_next`` works out one; ``plan`` answers any request, from the

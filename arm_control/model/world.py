@@ -54,10 +54,9 @@ class FreeCells:
 
     With ``pad_rad``, a cell is proved clear when the free cells cover the box of half-width
     h + pad around it (an erosion of free space's cells by ⌈pad / 2h⌉ cells): every
-    configuration of the cell is then free by that margin on both joints. Proving that box
-    at once, with δ grown for h + pad, had left 60 % of the clearance planner's checks to
-    the exact test. A cell forbidden as a whole is not clear either. Together: 0.4 exact
-    tests per configuration the planner asks about, where there were 1.3.
+    configuration of the cell is then free by that margin on both joints. (Proving that box
+    at once, with δ grown for h + pad, proves far fewer cells: the grown δ is coarse.) A cell
+    forbidden as a whole is not clear either.
     """
 
     HALF_WIDTH_RAD = math.radians(0.25)
@@ -275,8 +274,8 @@ class ForbiddenSpace:
     def prove_cells(self, tiles: int | None = None) -> bool:
         """Prove the cells this space's checks look up (free space's; with a margin, the
         clear ones too), ``tiles`` more at a time (None: all), ahead of the checks: each check
-        proves those it meets, and a goal into joint space no check had been to cost the
-        quick timing 2-3 times as much. True once all are."""
+        proves those it meets, so a goal into joint space no check has been to would pay for
+        proving its cells in the middle of its timing. True once all are."""
         levels = [free_cells(self.arm)]
         if self.margin_rad > 0.0:
             levels.append(free_cells(self.arm, self.margin_rad))

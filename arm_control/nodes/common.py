@@ -196,9 +196,8 @@ _stopping = False                  # a SIGINT or SIGTERM came (``interrupt``)
 def _stop_once() -> None:
     """The stop is remembered, and later SIGINTs and SIGTERMs are ignored: a Ctrl-C under
     ``ros2 launch`` comes twice (the terminal's to the process group, and launch's), and
-    the second one, landing in the clean-up or the interpreter's exit, had ended the sim
-    and the controller with a traceback or exit code -2 (launch still kills a node that
-    does not end)."""
+    the second one, landing in the clean-up or the interpreter's exit, would end the node
+    with a traceback or exit code -2 (launch still kills a node that does not end)."""
     global _stopping
     _stopping = True
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -220,13 +219,14 @@ def _note_stop(signum, frame):
 def run(node_class, args=None) -> int:
     """The Jazzy main() shape: construct, spin, clean up on every exit path.
 
-    A bad parameter stops the node at start with the parameter named (exit code 2).
+    A bad parameter stops the node at start with the parameter named (exit code 2). A node
+    that ends by itself may say how it went in ``exit_code``.
     """
     use_udp_transport()
     # Python's handler for SIGINT, marking the stop: rclpy's, installed by init, runs first
     # and then this one. A Ctrl-C that lands while rclpy converts a message taken surfaces
-    # as "Unable to convert call argument" before rclpy has shut the context down, and the
-    # sim had exited on that with a traceback (2 of 20 stops in one afternoon's probes).
+    # as "Unable to convert call argument" before rclpy has shut the context down; marked,
+    # it is taken as the stop it is, not as an error.
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _note_stop)
     try:
@@ -260,4 +260,4 @@ def run(node_class, args=None) -> int:
                 shutdown()
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return getattr(node, 'exit_code', 0)

@@ -54,11 +54,8 @@ from arm_control.parameters import ParameterError
 
 PLANNER_POLL_S = 0.05             # how often to look whether the planner is there
 # The executor's thread (messages, services) at SCHED_FIFO this low when the loop is at real
-# time: above every normal process, below the loop. At normal priority, a busy machine
-# preempts it while it holds Python's lock, and the loop waits for the lock: in a flood of
-# goals under two busy loops the loop stalled for 149-396 ms (its own worst period) and the
-# arm was e-stopped on its tracking error in 2 of 3 runs; at FIFO 1, 27-166 ms over 9 runs,
-# and one e-stop, after the sim had gone 0.1 s without a command.
+# time: above every normal process, below the loop. At normal priority a busy machine can
+# preempt it while it holds Python's lock, and the loop would then wait for the lock.
 EXECUTOR_PRIORITY = 1
 SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V command to arrive
 # A reading is timed at its stamp when that is at most this long before its arrival, and

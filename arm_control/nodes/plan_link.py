@@ -27,10 +27,9 @@ from arm_control.planning.planner import waypoints_from_poses
 # A call unanswered this long is sent again, at most RESENDS times; the earlier calls stay
 # open and the first answer counts. An answer can be lost: a planner we have just found may
 # not yet reach our reply reader (DDS discovery is not symmetric in time; under load it takes
-# seconds), and under two busy loops one answered in 34 ms never came within the 1 s. The
-# planner answers a repeated request from its last answer, so a call sent again to a planner
-# that is only slow (a first plan on a loaded machine took 0.47 s) costs a message (calls for
-# older requests are forgotten when a newer one goes out, so they do not come in between).
+# seconds). The planner answers a repeated request from its last answer, so a call sent
+# again to a planner that is only slow costs a message (calls for older requests are
+# forgotten when a newer one goes out, so they do not come in between).
 RESEND_AFTER_S = 0.3
 RESENDS = 2
 # The paths between presets are asked for once the arm has had no goal for this long (s):

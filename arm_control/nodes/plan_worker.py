@@ -56,9 +56,9 @@ MIN_HANDOVER_S = 0.03
 HANDOVER_SHARE = 0.4
 # A refinement that came too late is tried once more from later on, up to this share.
 RETRY_SHARE = 0.7
-# The keeper's niceness: below the worker, the planner and everything else at normal priority
-# (under two busy loops it still gets about a tenth of a core); at most this many paths wait
-# for it, the latest first.
+# The keeper's niceness: below the worker, the planner and everything else at normal
+# priority, so it takes only the CPU the others leave; at most this many paths wait for it,
+# the latest first.
 KEEPER_NICE = 10
 KEEPER_QUEUE = 256
 FIRST_RATIO = 12.0
@@ -112,10 +112,9 @@ def _serve(requests: Connection, results: Connection) -> None:
                 keeping.retune(item)
                 results.send(('kept', 0))
                 if first:
-                    # Ready once warm: the moving-start solver imported (0.8 s) and a first
-                    # move timed. Said ready before, the first goal waited for both, and
-                    # on a starved machine (the sim and the controller at 4x simulated time
-                    # take a core at real-time priority) that took seconds.
+                    # Ready once warm: the moving-start solver imported and a first move
+                    # timed, so that the first goal waits for neither (on a starved machine
+                    # both take seconds).
                     importing = threading.Thread(target=toppra_solver, daemon=True)
                     importing.start()
                     _warm_up(timer, clock)

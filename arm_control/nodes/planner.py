@@ -147,8 +147,8 @@ class PlannerNode(Node):
     def answer_at_real_time(self) -> None:
         """Prepared, the planner sleeps until a request: from now on every thread of it (the
         DDS threads that receive a request included) runs at ``realtime_priority``, so that
-        a goal does not wait behind busy processes for its plan. Under two busy loops, at
-        normal priority the planner's work took twice its CPU time."""
+        a goal does not wait behind busy processes for its plan (at normal priority on a busy
+        machine it would wait for a share of a core)."""
         problem = realtime.raise_process(self.config.realtime_priority)
         if problem:
             self.get_logger().warning(problem)

@@ -1,9 +1,8 @@
 """Real-time scheduling for the threads that keep a beat, where the system allows it.
 
-Under CPU load a 50 Hz loop at normal priority waits in the run queue behind busy processes:
-on a 2-core machine with two busy loops the controller's tick waited 10 ms at the median and
-40-74 ms at worst before it ran; at ``SCHED_FIFO`` it waited none. Robot software runs its
-loops this way: ros2_control's controller manager (FIFO 50) and WPILib's Notifier. It needs
+Under CPU load a 50 Hz loop at normal priority waits in the run queue behind busy processes,
+for a good part of its period; at ``SCHED_FIFO`` it runs when it is due. Robot software runs
+its loops this way: ros2_control's controller manager (FIFO 50) and WPILib's Notifier. It needs
 CAP_SYS_NICE or an rtprio limit (``/etc/security/limits.conf``: ``@realtime - rtprio 98``);
 without either, the node says so and runs at normal priority.
 """

@@ -6,7 +6,8 @@ waits for the controller's ``arm_state`` to settle in ``holding`` (or to refuse 
 logs the move time and the error the arm is held at, measured on ``/sim/ground_truth``
 ``hold_check_s`` after arrival: by then the arm is still, so a true state that reaches this
 node late cannot skew it. It is the demonstration the README's first command runs; with ROS
-installed, ``ros2 run arm_control tour`` does the same.
+installed, ``ros2 run arm_control tour`` does the same. Its exit code is the number of goals
+not reached (0: every one).
 """
 
 import math
@@ -25,6 +26,7 @@ from arm_control.nodes.common import (COMMANDS, controller_sees_planner, declare
 from arm_control.parameters import ParameterError
 
 FINISHED, REFUSED = 'holding', ('error', 'estopped', 'disabled')
+MAX_EXIT_CODE = 100             # the exit code: goals not reached, up to this
 
 
 class TourNode(Node):
@@ -46,7 +48,8 @@ class TourNode(Node):
         self.hold_check_s = float(params['hold_check_s'])
         self.state = ''
         self.true_q = None
-        self.results = []
+        self.results = []                            # (reached, line) per goal
+        self.exit_code = 0
         self.index, self.loop = -1, 0
         self.sent_at = None
         self.arrived_after_s = None                  # the move time, once holding
@@ -96,15 +99,15 @@ class TourNode(Node):
                 x, y = self.kinematics.forward(self.true_q)
                 error_mm = 1000.0 * math.hypot(x - goal[0], y - goal[1])
                 self.report(name, goal, f'reached in {self.arrived_after_s:.2f} s, held '
-                                        f'{error_mm:.1f} mm from the goal')
+                                        f'{error_mm:.1f} mm from the goal', reached=True)
         elif self.left_start_state and self.state in REFUSED:
             self.report(name, goal, f'not reached: controller went to {self.state}')
         elif elapsed > self.goal_timeout_s:
             self.report(name, goal, f'not reached within {self.goal_timeout_s:g} s')
 
-    def report(self, name, goal, outcome: str) -> None:
+    def report(self, name, goal, outcome: str, reached: bool = False) -> None:
         line = f'{name:>14} ({goal[0]:+.2f}, {goal[1]:+.2f}) m: {outcome}'
-        self.results.append(line)
+        self.results.append((reached, line))
         self.get_logger().info(line)
         self.send_next()
 
@@ -113,7 +116,11 @@ class TourNode(Node):
         if self.index == len(self.goals):
             self.index, self.loop = 0, self.loop + 1
             if self.loops and self.loop >= self.loops:
-                self.get_logger().info('tour finished:\n' + '\n'.join(self.results))
+                missed = sum(not reached for reached, _ in self.results)
+                self.exit_code = min(missed, MAX_EXIT_CODE)
+                self.get_logger().info(
+                    f'tour finished: {len(self.results) - missed} of {len(self.results)} goals '
+                    'reached\n' + '\n'.join(line for _, line in self.results))
                 self.context.try_shutdown()          # ends spin(); main() cleans up
                 return
         name, (x, y) = self.goals[self.index]

@@ -163,7 +163,9 @@ class ViewerNode(Node):
             self.get_logger().error(f'cannot write {path}: {error}', throttle_duration_sec=10.0)
 
     def on_shutdown(self) -> None:
-        if not self.headless:
+        if self.headless:
+            self.write_png()                    # the picture of where the arm ended
+        else:
             from matplotlib import pyplot
             pyplot.close('all')
 

@@ -23,6 +23,7 @@ MAX_GOALS = 256                 # goals shown at most; a flood beyond this is no
 STALE_AFTER_S = 0.5             # joint states older than this are called out on the picture
 GOAL_FRAMES = ('', FRAME_ID)
 GOAL_Z_TOLERANCE_M = 1e-3
+PATH_START_RAD = 0.05           # a path begins at the arm when within this on both joints
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,12 @@ def is_idle_state(state: str) -> bool:
     return 'wait' in letters or 'idle' in letters
 
 
+def has_no_goal(state: str) -> bool:
+    """States in which a planned path is not the arm's: the controller, holding or waiting,
+    asks for the paths between presets ahead of time, and the planner publishes those too."""
+    return state in ('holding', 'waiting')
+
+
 class ViewerModel:
     """The latest of everything the viewer draws, updated by message contents."""
 
@@ -72,7 +79,8 @@ class ViewerModel:
         self.joint_time_s = -math.inf
         self.setpoint_rad: tuple[float, float] | None = None
         self.state = ''
-        self.path_rad: tuple[tuple[float, float], ...] = ()
+        self.path_rad: tuple[tuple[float, float], ...] = ()     # of the arm's last move
+        self.idle_path_rad: tuple[tuple[float, float], ...] = ()
         self.goals: list[tuple[float, float]] = []
         self.ghost_xy: tuple[float, float] | None = None
 
@@ -113,6 +121,9 @@ class ViewerModel:
     def on_state(self, state: str) -> None:
         if is_idle_state(state) and not is_idle_state(self.state):
             self.goals.clear()
+        if not has_no_goal(state) and has_no_goal(self.state) and self.idle_path_rad \
+                and self._starts_at_the_arm(self.idle_path_rad):
+            self.path_rad = self.idle_path_rad      # the goal's path came before its state
         self.state = state
 
     def on_path(self, poses) -> str | None:
@@ -120,8 +131,16 @@ class ViewerModel:
         poses = [tuple(p) for p in poses]
         if not all(len(p) == 3 and all(_finite(v) for v in p) for p in poses):
             return 'planned path with non-finite poses: ignored'
-        self.path_rad = path_configurations(self.space, poses)
+        path_rad = path_configurations(self.space, poses)
+        if has_no_goal(self.state):
+            self.idle_path_rad = path_rad           # not a move: the controller planning ahead
+        else:
+            self.path_rad = path_rad
         return None
+
+    def _starts_at_the_arm(self, path_rad) -> bool:
+        return self.joint_rad is not None and max(
+            abs(a - b) for a, b in zip(path_rad[0], self.joint_rad)) <= PATH_START_RAD
 
     def scene(self, now_s: float) -> Scene:
         note = ''

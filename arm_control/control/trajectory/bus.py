@@ -200,9 +200,9 @@ def under_the_bus(solve, terms: PathTerms, limits: TrajectoryLimits, grid, sag_v
     at most ``after_fit`` more once one fits), with the sag it was timed with. When none
     fits, the last timing if it misses by no more than ``NEAR_MISS_V`` (the final check
     tightens it), else None with ``give_up``, else the closest miss within ``NEAR_MISS_V``
-    (the iteration need not converge: on one move its last timing missed by 2 V where its
-    first had missed by 0.13 V), else the safe one (``safe``: 25 % slower on that move);
-    None when ``solve`` finds none."""
+    (the iteration need not converge: a later timing can miss by more than an earlier one),
+    else the safe one (``safe``: the lowest bus, much slower); None when ``solve`` finds
+    none."""
     follower = BusSag(terms, limits, grid, sag_v, relax)
     left = math.inf if after_fit is None else after_fit
     closest = (math.inf, None, None)        # (worst excess V, x, sag) of the closest miss

@@ -48,8 +48,8 @@ _MIN_DURATION_S = 0.25
 @functools.lru_cache(maxsize=8)
 def _with_room(arm: ArmConfig, margin_rad: float = 0.0) -> ForbiddenSpace:
     """Forbidden space with every region grown by ``_ROOM_M`` more, and the elbow's tightest
-    fold ``_ROOM_RAD`` wider: a bend folding it to the limit had the arm 0.6° past it. With
-    the searched space's ``margin_rad``, so that room implies free there too."""
+    fold ``_ROOM_RAD`` wider, since tracking error carries an arm bent to the limit past it.
+    With the searched space's ``margin_rad``, so that room implies free there too."""
     world = dataclasses.replace(arm.world, clearance_m=arm.world.clearance_m + _ROOM_M,
                                 min_elbow_fold_rad=arm.world.min_elbow_fold_rad + _ROOM_RAD)
     return ForbiddenSpace(dataclasses.replace(arm, world=world), margin_rad)
@@ -148,7 +148,7 @@ def faster_shape(base: BlendedPath, shape, dynamics: ArmDynamics, limits: Trajec
     """(``shape``, or None when ``base`` unbent is as fast; the (σ, sag) of the bus the one
     kept leaves, or None), both timed exactly on the bus's grid (``BUS_GRID``, the blends cut
     finely) under their own bus: on a path of many corners the search's few stages can
-    misjudge (a bend it rated faster took 4 % longer than the path itself)."""
+    misjudge, rating faster a bend that is slower than the path itself."""
     if shape is None or not np.any(shape):
         return None, None
     timed = []

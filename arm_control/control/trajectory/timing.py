@@ -70,8 +70,8 @@ def time_from_rest(path, grid, terms: PathTerms, limits: TrajectoryLimits,
                              bus_hint)
     start = np.interp(grid, sigma, sag)
     if bus_hint is not None and np.array_equal(bus_hint[0], grid):
-        # This piece's own bus from its last timing (tightened since): the coarse one alone
-        # had the fine timing miss it, and the safe bus take 1.3x as long.
+        # This piece's own bus from its last timing (tightened since): from the coarse one
+        # alone the fine timing can miss it and fall back to the much slower safe bus.
         start = np.maximum(start, bus_hint[1])
     x, fine = under_the_bus(solve, terms, limits, grid, start, FINE_BUS_ITERATIONS, relax=0.0,
                             give_up=True)
@@ -197,8 +197,8 @@ def verified(pieces, start, end, dynamics: ArmDynamics,
                                           / max(verdict.accel_ratio, 1.0)))
         # Between grid points the exact model can ask a little more: tighten by the excess
         # (a few volts at most: a bus that would brown out has none to measure it by),
-        # around the grid points where it went past: a whole path held back for one spot
-        # had "floor -> full extension, low" 5 % slower. Everywhere when that costs more
+        # around the grid points where it went past, since a whole path held back for one
+        # spot is slower everywhere else. Everywhere when that costs more
         # (the bus it leaves can then take the fine timing longer to find), and the last time.
         excess = np.clip(verdict.excess_at, 0.0, 2.0)
         everywhere = [m + float(np.max(excess)) + VOLTAGE_TOLERANCE for m in margins]
