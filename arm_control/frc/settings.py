@@ -1,7 +1,7 @@
 """The bridge's and the robot stand-in's settings, validated, from ``config/arm.yaml``
 (sections ``/frc_bridge`` and ``/frc_robot_sim``)."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Mapping
 
 from arm_control.parameters import ParameterError, read_parameter_files, Reader
@@ -21,6 +21,13 @@ def _port(read: Reader, name: str) -> int:
     if port > 65535:
         raise ParameterError(f"parameter '{name}' = {port}: a TCP port is at most 65535")
     return port
+
+
+def _phase(phase_s: float, rate_hz: float, name: str) -> float:
+    if not 0.0 <= phase_s < 1.0 / rate_hz:
+        raise ParameterError(f"parameter '{name}' = {phase_s}: expected a phase within the "
+                             f'loop period, 0 <= phase < {1.0 / rate_hz:g} s')
+    return float(phase_s)
 
 
 @dataclass(frozen=True)
@@ -66,15 +73,21 @@ class FrcRobotSimConfig:
 
     nt_port: int
     loop_rate_hz: float
+    loop_phase_s: float
     command_timeout_s: float
     start_enabled: bool
+
+    def with_phase(self, phase_s: float) -> 'FrcRobotSimConfig':
+        return replace(self, loop_phase_s=_phase(phase_s, self.loop_rate_hz, 'loop_phase_s'))
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'FrcRobotSimConfig':
         read = Reader(params)
+        rate_hz = read.number('loop_rate_hz', low=0.0, high=1000.0, low_open=True)
         return cls(
             nt_port=_port(read, 'nt_port'),
-            loop_rate_hz=read.number('loop_rate_hz', low=0.0, high=1000.0, low_open=True),
+            loop_rate_hz=rate_hz,
+            loop_phase_s=_phase(read.number('loop_phase_s'), rate_hz, 'loop_phase_s'),
             command_timeout_s=read.positive('command_timeout_s'),
             start_enabled=read.boolean('start_enabled'),
         )

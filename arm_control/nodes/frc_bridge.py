@@ -1,14 +1,16 @@
 """The ``frc_bridge`` node: a real FRC robot (or ``frc_robot_sim``) in the sim's place.
 
-An NT4 client (pyntcore) of the roboRIO, found by team number or address. The robot's
-readings become ``joint_states``, ``motor_encoders`` (JointState), ``battery_state``
-(BatteryState) and ``motor_currents`` (Float64MultiArray), stamped when the robot took
-them. ``voltage_command`` goes to the robot with its NT timestamp (mode ``voltage``), or
-the controller's ``controller/setpoint`` with the model's feedforward (mode ``setpoint``),
-for a loop on the roboRIO. A disabled robot, or one whose readings stop for
-``reading_timeout_s`` (an error), gets 0 V. The controller is disabled and enabled with the
-robot (``controller/enable``); when the robot is lost, its joint states stop, and it stops
-commanding on its own. Publishes the arm as a Mechanism2d on NT,
+An NT4 client (pyntcore) of the roboRIO, found by team number or address. Each of the
+robot's readings (one NT value per robot loop) becomes ``joint_states``, ``motor_encoders``
+(JointState), ``battery_state`` (BatteryState) and ``motor_currents`` (Float64MultiArray),
+all stamped with the instant the robot read its sensors. ``voltage_command`` goes to the
+robot as a command for the instant it is sent (mode ``voltage``), or the controller's
+``controller/setpoint`` with the model's feedforward as a one-setpoint profile for its
+stamp (mode ``setpoint``), flushed at once. A disabled robot, a dropped connection, or one
+whose readings stop for ``reading_timeout_s`` (an error) gets 0 V. The controller is
+disabled and enabled with the robot (``controller/enable``); when the robot is lost, its
+joint states stop, and it stops commanding on its own. Draws the arm as a Mechanism2d on NT
+(its own connection, at most 25 Hz),
 ``~/events`` (String) and ``/diagnostics``; logs the run as a .wpilog when ``wpilog_path``
 is set. The rules live in ``arm_control.frc``; this shell only wires ROS to them.
 """
@@ -28,13 +30,14 @@ from std_srvs.srv import SetBool
 
 from arm_control.config import ArmConfig, JOINT_NAMES
 from arm_control.frc import contract as nt
+from arm_control.frc.codec import decode_reading, encode_profile, encode_voltage, ProfileCommand
 from arm_control.frc.conversions import (battery_state_current_a, clamp_voltage, commanding,
-                                         finite_number, joint_effort_nm, joint_pair,
-                                         ros_stamp_ns, SetpointFeedforward)
+                                         joint_effort_nm, joint_pair, ros_stamp_ns,
+                                         SetpointFeedforward)
 from arm_control.frc.mechanism import Mechanism2dPublisher
 from arm_control.frc.rules import LinkState, RobotLink, ZERO_V
 from arm_control.frc.settings import FrcBridgeConfig
-from arm_control.frc.tables import BridgeTables, now_us
+from arm_control.frc.tables import BridgeTables, DRAW_PERIOD_S, now_us
 from arm_control.frc.wpilog import (BRIDGE_EVENTS, CONTROLLER_SETPOINT,
                                     CONTROLLER_SETPOINT_VELOCITY, CONTROLLER_VOLTAGE, RunLog)
 from arm_control.model.dynamics import ArmDynamics
@@ -73,10 +76,8 @@ class FrcBridgeNode(Node):
                 raise ParameterError(
                     f"parameter 'wpilog_path' = {self.config.wpilog_path!r}: {error}") from error
         self.started = time.monotonic()
-        self.setpoint = None            # (position, velocity, feedforward_v, received at)
-        self.velocity = None            # the robot's latest velocity, effort and supply current
-        self.effort = []
-        self.supply_current_a = math.nan
+        self.setpoint = None            # (position, velocity, feedforward_v, received at, stamp)
+        self.drawn_s = {'arm': -math.inf, 'setpoint': -math.inf}
         self.counts = {'readings': 0, 'commands sent': 0, 'inputs refused': 0}
         self.counts_said = dict(self.counts)
         self.refused_said_s = {}        # when bad input from each source was last said
@@ -101,13 +102,12 @@ class FrcBridgeNode(Node):
         self.instance = ntcore.NetworkTableInstance.create()
         self.tables = BridgeTables(self.instance, IDENTITY, self.config.team_number,
                                    self.config.server_address, self.config.nt_port)
-        self.mechanism = Mechanism2dPublisher(self.instance, self.arm)
+        self.mechanism = Mechanism2dPublisher(self.tables.drawing, self.arm)
         # ntcore calls listeners on its own thread: they only wake the executor, which
-        # reads the values on this node's thread. The robot sets the position last in each
-        # loop, so that one wakes it for all the loop's readings.
+        # reads the values on this node's thread.
         self.nt_wake = self.create_guard_condition(self.on_nt)
         self.listeners = [
-            self.instance.addListener(self.tables.readings[nt.POSITION],
+            self.instance.addListener(self.tables.reading,
                                       ntcore.EventFlags.kValueRemote, lambda _: self.wake()),
             self.instance.addConnectionListener(False, self.on_connection)]
 
@@ -153,64 +153,52 @@ class FrcBridgeNode(Node):
                 self.get_logger().info(f'NT4 connected to {ip}:{port}')
             else:
                 self.get_logger().warning(f'NT4 disconnected from {ip}:{port}')
-        nt_now, ros_now = now_us(), self.get_clock().now().nanoseconds
-        readings = self.tables.readings
-
-        def header(value) -> Header:
-            stamp_ns = ros_stamp_ns(value.time, nt_now, ros_now)
-            return Header(stamp=Time(sec=stamp_ns // 1_000_000_000,
-                                     nanosec=stamp_ns % 1_000_000_000), frame_id='')
-
-        for value in readings[nt.ENABLED].readQueue():
-            self.record(nt.ENABLED, bool(value.value), value.time)
-        for value in readings[nt.APPLIED_VOLTAGE].readQueue():
-            self.record(nt.APPLIED_VOLTAGE, value.value, value.time)
-        for value in readings[nt.VELOCITY].readQueue():
-            velocity = self.checked(joint_pair, value, nt.VELOCITY)
-            if velocity is not None:
-                self.velocity = velocity
-        for value in readings[nt.MOTOR_CURRENT].readQueue():
-            current = self.checked(joint_pair, value, nt.MOTOR_CURRENT)
-            if current is not None:
-                self.effort = list(joint_effort_nm(current, self.dynamics))
-                self.currents_pub.publish(Float64MultiArray(data=list(current)))
-        for value in readings[nt.SUPPLY_CURRENT].readQueue():
-            supply_a = self.checked(finite_number, value, nt.SUPPLY_CURRENT)
-            if supply_a is not None:
-                self.supply_current_a = supply_a
-        for value in readings[nt.BUS_VOLTAGE].readQueue():
-            bus_v = self.checked(finite_number, value, nt.BUS_VOLTAGE)
-            if bus_v is not None:
-                self.battery_pub.publish(battery_state(
-                    header(value), bus_v, battery_state_current_a(self.supply_current_a)))
-        for value in readings[nt.ENCODER].readQueue():
-            encoder = self.checked(joint_pair, value, nt.ENCODER)
-            if encoder is not None:
-                self.encoders_pub.publish(JointState(header=header(value),
-                                                     name=list(JOINT_NAMES),
-                                                     position=list(encoder)))
-        for value in readings[nt.POSITION].readQueue():
-            position = self.checked(joint_pair, value, nt.POSITION)
-            if position is None:
+        if not self.tables.connected():
+            self.on_link_event(self.link.check(self.now_s(), False))    # dropped: say so now
+        for value in self.tables.reading.readQueue():
+            try:
+                reading = decode_reading(value.value)
+            except ValueError as error:
+                self.refuse(nt.READING.name, f'ignored a reading: {error}')
                 continue
-            self.counts['readings'] += 1
-            self.joint_states_pub.publish(JointState(
-                header=header(value), name=list(JOINT_NAMES), position=list(position),
-                velocity=list(self.velocity or ()), effort=self.effort))
-            self.mechanism.show('arm', position)
-            enabled = readings[nt.ENABLED].getAtomic()
-            if enabled.time:                # a reading counts once the robot said its mode
-                self.on_link_event(self.link.on_reading(self.now_s(), enabled.value))
+            self.record(nt.READING, value.value, reading.time_us - self.tables.server_offset_us())
+            self.publish_reading(reading)
+            self.on_link_event(self.link.on_reading(self.now_s(), reading.enabled))
 
-    def checked(self, convert, value, topic: nt.NtTopic):
-        """``convert(value)``, logged; None (and a warning) if the robot sent nonsense."""
-        try:
-            converted = convert(value.value, topic.name)
-        except ValueError as error:
-            self.refuse(topic.name, f'ignored a reading: {error}')
-            return None
-        self.record(topic, converted, value.time)
-        return converted
+    def ros_stamp(self, server_time_us: int) -> Header:
+        """A time on the NT server's clock as a ROS header stamp (ntcore's offset to the
+        server, then this process's NT clock against ROS's)."""
+        local_us = server_time_us - self.tables.server_offset_us()
+        stamp_ns = ros_stamp_ns(local_us, now_us(), self.get_clock().now().nanoseconds)
+        return Header(stamp=Time(sec=stamp_ns // 1_000_000_000,
+                                 nanosec=stamp_ns % 1_000_000_000), frame_id='')
+
+    def publish_reading(self, reading) -> None:
+        """One robot loop's reading, whole: every message gets its one stamp."""
+        self.counts['readings'] += 1
+        header = self.ros_stamp(reading.time_us)
+        current = reading.motor_current_a
+        effort = list(joint_effort_nm(current, self.dynamics)) \
+            if all(map(math.isfinite, current)) else []
+        self.joint_states_pub.publish(JointState(
+            header=header, name=list(JOINT_NAMES), position=list(reading.position_rad),
+            velocity=list(reading.velocity_rad_s), effort=effort))
+        if effort:
+            self.currents_pub.publish(Float64MultiArray(data=list(current)))
+        if all(map(math.isfinite, reading.encoder_rad)):
+            self.encoders_pub.publish(JointState(header=header, name=list(JOINT_NAMES),
+                                                 position=list(reading.encoder_rad)))
+        if math.isfinite(reading.bus_voltage_v):
+            self.battery_pub.publish(battery_state(
+                header, reading.bus_voltage_v,
+                battery_state_current_a(reading.supply_current_a)))
+        self.draw('arm', reading.position_rad)
+
+    def draw(self, root: str, position) -> None:
+        """The Mechanism2d, at most every DRAW_PERIOD_S: its own connection, never flushed."""
+        if self.now_s() - self.drawn_s[root] >= DRAW_PERIOD_S:
+            self.drawn_s[root] = self.now_s()
+            self.mechanism.show(root, position)
 
     # ------------------------------------------------------------------ ROS -> robot
 
@@ -222,19 +210,28 @@ class FrcBridgeNode(Node):
             self.refuse('voltage_command',
                         f'ignored {error}; the robot stops on its own when commands stop')
             return
-        self.record(CONTROLLER_VOLTAGE, voltage)
         outgoing = self.link.outgoing(voltage)
         if self.config.mode == 'voltage' or not commanding(outgoing):
-            self.tables.send_voltage(outgoing)
-            self.record(nt.VOLTAGE_COMMAND, outgoing)
+            self.send(encode_voltage(self.tables.server_now_us(), outgoing))
         elif self.setpoint is not None and \
                 self.now_s() - self.setpoint[3] <= SETPOINT_MAX_AGE_S:
-            self.tables.send_setpoint(*self.setpoint[:3])
-            for topic, values in zip(nt.SETPOINT_COMMAND, self.setpoint[:3]):
-                self.record(topic, values)
-        else:
-            return      # no fresh setpoint: nothing, and the robot's own timeout stops it
+            position, velocity, feedforward_v, _, stamp_ns = self.setpoint
+            self.send(encode_profile(ProfileCommand(
+                self.server_time_us(stamp_ns), nt.LOOP_PERIOD_S, (position,), (velocity,),
+                (feedforward_v,))))
+        # else nothing: no fresh setpoint, and the robot's own timeout stops it
+        self.record(CONTROLLER_VOLTAGE, voltage)
+
+    def send(self, command) -> None:
+        """A command to the robot, flushed at once; logged after it has gone."""
+        self.tables.send_command(command)
         self.counts['commands sent'] += 1
+        self.record(nt.COMMAND, command)
+
+    def server_time_us(self, ros_stamp_ns: int) -> int:
+        """A ROS stamp on the NT server's clock: its age on the ROS clock, back from now."""
+        age_us = (self.get_clock().now().nanoseconds - ros_stamp_ns) // 1000
+        return self.tables.server_now_us() - age_us
 
     def on_setpoint(self, msg: JointState) -> None:
         try:
@@ -245,8 +242,9 @@ class FrcBridgeNode(Node):
             return
         if self.config.mode == 'setpoint':
             feedforward_v = self.feedforward(stamp_s(msg.header), position, velocity)
-            self.setpoint = (position, velocity, feedforward_v, self.now_s())
-        self.mechanism.show('setpoint', position)
+            stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            self.setpoint = (position, velocity, feedforward_v, self.now_s(), stamp_ns)
+        self.draw('setpoint', position)
         self.record(CONTROLLER_SETPOINT, position)
         self.record(CONTROLLER_SETPOINT_VELOCITY, velocity)
 
@@ -257,7 +255,7 @@ class FrcBridgeNode(Node):
     # ------------------------------------------------------------------ the link
 
     def check_link(self) -> None:
-        if self.now_s() - self.link.last_reading_s > self.config.reading_timeout_s:
+        if self.link.silent_s > 0.5 * self.config.reading_timeout_s:
             self.on_nt()        # what arrived while this process was busy is not lost time
         self.on_link_event(self.link.check(self.now_s(), self.tables.connected()))
         self.tell_controller()
@@ -275,8 +273,7 @@ class FrcBridgeNode(Node):
         self.events_pub.publish(String(data=event.message))
         self.record(BRIDGE_EVENTS, event.message)
         if not self.link.may_command:
-            self.tables.send_voltage(ZERO_V)
-            self.record(nt.VOLTAGE_COMMAND, ZERO_V)
+            self.send(encode_voltage(self.tables.server_now_us(), ZERO_V))
         if event.controller_enabled is not None:
             self.enable_wanted = event.controller_enabled
             self.enable_asked_s = -math.inf
@@ -341,7 +338,7 @@ class FrcBridgeNode(Node):
     def on_shutdown(self) -> None:
         """0 V on the way out; then ntcore's threads stopped before Python's go away."""
         try:
-            self.tables.send_voltage(ZERO_V)
+            self.tables.send_command(encode_voltage(self.tables.server_now_us(), ZERO_V))
             time.sleep(SHUTDOWN_SEND_S)     # NT4 has no acknowledgement: give it time to go
         finally:
             for listener in self.listeners:

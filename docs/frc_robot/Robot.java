@@ -1,0 +1,121 @@
+// The roboRIO side of docs/frc_bridge.md, in Java (WPILib TimedRobot, NT4 publishers and
+// subscribers). Not compiled in this repository (no WPILib Java toolchain here): paste it
+// into a WPILib project and adapt channels, gear ratio, sensor offsets, motor controllers.
+// Each loop, in this order: read the sensors (and the time), take the newest command that
+// has arrived, set the motors, publish the loop's reading as one value stamped with the
+// sensors' time, flush.
+package frc.robot;
+
+import edu.wpi.first.networktables.DoubleArrayPublisher;
+import edu.wpi.first.networktables.DoubleArraySubscriber;
+import edu.wpi.first.networktables.NetworkTableInstance;
+import edu.wpi.first.networktables.PubSubOption;
+import edu.wpi.first.networktables.TimestampedDoubleArray;
+import edu.wpi.first.wpilibj.AnalogPotentiometer;
+import edu.wpi.first.wpilibj.DriverStation;
+import edu.wpi.first.wpilibj.Encoder;
+import edu.wpi.first.wpilibj.PowerDistribution;
+import edu.wpi.first.wpilibj.RobotController;
+import edu.wpi.first.wpilibj.TimedRobot;
+import edu.wpi.first.wpilibj.motorcontrol.PWMTalonSRX;
+
+public class Robot extends TimedRobot {
+  static final double GEAR_RATIO = 159.3;           // motor turns per joint turn
+  static final double ENCODER_CPR = 2048;           // encoder counts per motor turn
+  static final long COMMAND_TIMEOUT_US = 100_000;   // a command drives until time_us + this
+  static final double[] KP = {90.0, 75.0};          // profile feedback: V/rad
+  static final double[] KD = {4.0, 3.0};            // V s/rad
+  static final int VOLTAGE_SIZE = 3;                // [time_us, V_s, V_e] ...
+  static final int PROFILE_HEAD = 2, PROFILE_POINT = 6;  // ... or [time_us, period_s, (q, qd, ff)...]
+
+  final NetworkTableInstance nt = NetworkTableInstance.getDefault();
+  final PubSubOption[] fast = {
+    PubSubOption.periodic(0.005), PubSubOption.keepDuplicates(true), PubSubOption.sendAll(true)
+  };
+  final DoubleArrayPublisher readingPub =
+      nt.getDoubleArrayTopic("/arm/robot/reading").publish(fast);
+  final DoubleArraySubscriber commandSub =
+      nt.getDoubleArrayTopic("/arm/command/motors").subscribe(new double[] {}, fast);
+  double[] held = null;                             // the newest command taken
+
+  final PWMTalonSRX[] shoulderMotors = {new PWMTalonSRX(0), new PWMTalonSRX(1)};
+  final PWMTalonSRX elbowMotor = new PWMTalonSRX(2);
+  final AnalogPotentiometer shoulderPot = new AnalogPotentiometer(0, 2 * Math.PI, -Math.PI / 2);
+  final AnalogPotentiometer elbowPot = new AnalogPotentiometer(1, 2 * Math.PI, -Math.PI);
+  final Encoder[] encoders = {new Encoder(0, 1), new Encoder(2, 3)};
+  final PowerDistribution pdh = new PowerDistribution();
+
+  @Override
+  public void robotInit() {
+    for (Encoder encoder : encoders) {
+      encoder.setDistancePerPulse(2 * Math.PI / (ENCODER_CPR * GEAR_RATIO));
+    }
+  }
+
+  static boolean isCommand(double[] c) {
+    return c.length == VOLTAGE_SIZE
+        || (c.length > PROFILE_HEAD && (c.length - PROFILE_HEAD) % PROFILE_POINT == 0 && c[1] > 0);
+  }
+
+  /** A held command's voltage now: a pair as it is; a profile's setpoint for now (the last
+   * past its end) closed by PD on this loop's reading. */
+  static double[] voltageFor(double[] c, long nowUs, double[] q, double[] qd) {
+    if (c.length == VOLTAGE_SIZE) {
+      return new double[] {c[1], c[2]};
+    }
+    int points = (c.length - PROFILE_HEAD) / PROFILE_POINT;
+    int k = (int) Math.floor((nowUs - c[0]) * 1e-6 / c[1] + 1e-6);
+    int b = PROFILE_HEAD + PROFILE_POINT * Math.min(Math.max(k, 0), points - 1);
+    double[] v = new double[2];
+    for (int j = 0; j < 2; j++) {
+      v[j] = c[b + 4 + j] + KP[j] * (c[b + j] - q[j]) + KD[j] * (c[b + 2 + j] - qd[j]);
+    }
+    return v;
+  }
+
+  @Override
+  public void robotPeriodic() {
+    // 1. The sensors, and the instant they were read: on a roboRIO the FPGA clock is the
+    //    NT server's clock, the time base of the whole contract.
+    long nowUs = RobotController.getFPGATime();
+    double[] q = {shoulderPot.get(), elbowPot.get()};
+    double[] qd = {encoders[0].getRate(), encoders[1].getRate()};
+    double[] enc = {encoders[0].getDistance(), encoders[1].getDistance()};
+    double[] current = {pdh.getCurrent(0), pdh.getCurrent(2)};       // one motor a joint
+    double supply = pdh.getCurrent(0) + pdh.getCurrent(1) + pdh.getCurrent(2);
+    double bus = RobotController.getBatteryVoltage();
+    boolean enabled = DriverStation.isEnabled();
+
+    // 2. The newest command that has arrived: taken if newer than the one held and not past
+    //    its expiry; dropped while disabled.
+    for (TimestampedDoubleArray value : commandSub.readQueue()) {
+      double[] c = value.value;
+      if (enabled && isCommand(c) && nowUs < c[0] + COMMAND_TIMEOUT_US
+          && (held == null || c[0] > held[0])) {
+        held = c;
+      }
+    }
+    if (!enabled) {
+      held = null;
+    }
+
+    // 3. The voltage from now on: 0 V once the command held is past its expiry.
+    double[] v = {0.0, 0.0};
+    if (held != null && nowUs < held[0] + COMMAND_TIMEOUT_US) {
+      v = voltageFor(held, nowUs, q, qd);
+    }
+    for (int j = 0; j < 2; j++) {
+      v[j] = Math.max(-bus, Math.min(bus, v[j]));
+    }
+    for (PWMTalonSRX motor : shoulderMotors) {
+      motor.setVoltage(v[0]);
+    }
+    elbowMotor.setVoltage(v[1]);
+
+    // 4. The loop's reading, whole, stamped with the sensors' instant; sent at once.
+    readingPub.set(new double[] {
+      nowUs, enabled ? 1 : 0, q[0], q[1], qd[0], qd[1], enc[0], enc[1],
+      current[0], current[1], bus, supply, v[0], v[1]}, nowUs);
+    nt.flush();
+  }
+}
