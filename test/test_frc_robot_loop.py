@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from arm_control.frc import codec, contract as nt, rules
-from arm_control.frc.robot_loop import loop_instants, play_profile, RobotLoop
+from arm_control.frc.robot_loop import loop_instants, RobotLoop
 from arm_control.frc.tables import now_us
 from arm_control.model.plant import ArmPlant
+from arm_control.model.profile import Profile, Setpoint
 
 PERIOD_S = nt.LOOP_PERIOD_S
 GAINS = ((90.0, 4.0), (75.0, 3.0))
@@ -21,7 +22,7 @@ START = (0.9, -0.6)
 def robot(arm, seed=3):
     """A robot loop over a plant that starts off its support (so 0 V lets it fall)."""
     plant = ArmPlant(arm, START, 0.001, seed)
-    return RobotLoop(plant, GAINS, arm.battery.nominal_voltage, TIMEOUT_S)
+    return RobotLoop(plant, arm.battery.nominal_voltage, TIMEOUT_S)
 
 
 def run(loop, instants, arrivals, enabled=True):
@@ -138,26 +139,45 @@ def test_a_malformed_reading_is_refused_naming_the_topic(values):
         codec.decode_reading(values)
 
 
-def test_commands_round_trip_and_a_two_value_pair_is_a_voltage():
+def profile(time_us, setpoints, step_s=PERIOD_S):
+    return codec.profile_command(time_us, Profile(0.0, step_s, GAINS, tuple(
+        Setpoint(q, qd, ff) for q, qd, ff in setpoints)))
+
+
+def test_commands_round_trip_and_a_three_value_command_is_a_voltage():
     assert codec.decode_command(codec.encode_voltage(5_000_000, (1.5, -2.0))) == \
         codec.VoltageCommand(5_000_000, (1.5, -2.0))
-    profile = codec.ProfileCommand(5_000_000, 0.02, ((0.1, 0.2), (0.3, 0.4)),
-                                   ((1.0, 2.0), (3.0, 4.0)), ((5.0, 6.0), (7.0, 8.0)))
-    assert codec.decode_command(codec.encode_profile(profile)) == profile
-    for bad in ([1.0, 2.0], [1.0, 0.02] + [1.0] * 5, [1.0, 0.0] + [0.0] * 6, [math.nan, 1.0, 2.0]):
+    sent = profile(5_000_000, [((0.1, 0.2), (1.0, 2.0), (5.0, 6.0)),
+                               ((0.3, 0.4), (3.0, 4.0), (7.0, 8.0))])
+    values = codec.encode_profile(sent)
+    assert len(values) == nt.PROFILE_HEAD_SIZE + 2 * nt.PROFILE_POINT_SIZE
+    assert values[0] == 5_000_000 and values[2:6] == [90.0, 4.0, 75.0, 3.0]
+    assert codec.decode_command(values) == sent
+    assert sent.end_us == 5_020_000
+    for bad in ([1.0, 2.0], [1.0, 0.02] + [1.0] * 5, [1.0, 0.0] + [1.0] * 10,
+                [math.nan, 1.0, 2.0]):
         with pytest.raises(ValueError, match=nt.COMMAND.name):
             codec.decode_command(bad)
 
 
-def test_a_profile_is_played_at_the_robot_s_instant():
-    """Setpoint k is for time_us + k·period: between two, the earlier; past the end, the
-    last; on the setpoint itself, its feedforward alone."""
-    profile = codec.ProfileCommand(1_000_000, 0.02, ((0.0, 0.0), (0.1, 0.2)),
-                                   ((0.0, 0.0), (1.0, 1.0)), ((1.0, 1.0), (2.0, 3.0)))
-    assert play_profile(profile, 1.005, (0.0, 0.0), (0.0, 0.0), GAINS) == (1.0, 1.0)
-    assert play_profile(profile, 1.02, (0.1, 0.2), (1.0, 1.0), GAINS) == (2.0, 3.0)
-    late = play_profile(profile, 1.5, (0.0, 0.2), (1.0, 1.0), GAINS)
-    assert late == pytest.approx((2.0 + 90.0 * 0.1, 3.0))
+def test_a_profile_is_played_at_the_robot_s_instant_and_held_past_its_end(arm):
+    """The loop plays a profile with its own gains at the loop's instant (the nearest
+    setpoint, extrapolated along its velocity); past its end, its last setpoint at rest;
+    past its last setpoint + the timeout, 0 V."""
+    loop = robot(arm)
+    sent = profile(1_000_000, [((0.9, -0.6), (0.0, 0.0), (1.0, 1.0)),
+                               ((0.9, -0.6), (1.0, 1.0), (2.0, 3.0))])
+    reading, _ = loop.step(1.021, True, [sent])
+    q, qd = reading.position_rad, reading.velocity_rad_s
+    expected = [ff + kp * (0.9 + 0.001 - q[0] if j == 0 else -0.6 + 0.001 - q[1])
+                + kd * (1.0 - qd[j]) for j, (ff, (kp, kd)) in enumerate(zip((2.0, 3.0), GAINS))]
+    assert reading.applied_voltage_v == pytest.approx(expected)
+    late, _ = loop.step(1.08, True)
+    q, qd = late.position_rad, late.velocity_rad_s
+    held = [ff + kp * (target - q[j]) - kd * qd[j] for j, (ff, (kp, kd), target) in
+            enumerate(zip((2.0, 3.0), GAINS, (0.9, -0.6)))]
+    assert late.applied_voltage_v == pytest.approx(held)
+    assert loop.step(1.12, True)[0].applied_voltage_v == (0.0, 0.0)     # 1.02 + 0.1 s
 
 
 def test_the_loop_s_instants_keep_their_phase():

@@ -13,13 +13,13 @@ import pytest
 
 from arm_control import config
 from arm_control.frc import contract as nt
-from arm_control.frc.codec import (decode_reading, encode_profile, encode_voltage,
-                                   ProfileCommand)
+from arm_control.frc.codec import decode_reading, encode_profile, encode_voltage, profile_command
 from arm_control.frc.conversions import SetpointFeedforward
 from arm_control.frc.robot_sim import RobotStandIn
 from arm_control.frc.settings import load_robot_sim
 from arm_control.frc.tables import BridgeTables, free_port, LOOPBACK, now_us, RobotTables
 from arm_control.model.dynamics import ArmDynamics
+from arm_control.model.profile import Profile, Setpoint
 
 PERIOD_S = nt.LOOP_PERIOD_S
 TIMEOUT_S = 0.1
@@ -27,9 +27,7 @@ TIMEOUT_S = 0.1
 
 def stand_in(phase_s=0.007):
     arm, sim = config.load('sim')
-    controller = config.load('controller')[1]
-    return RobotStandIn(arm, sim, load_robot_sim().with_phase(phase_s),
-                        (controller.shoulder_pid, controller.elbow_pid), free_port())
+    return RobotStandIn(arm, sim, load_robot_sim().with_phase(phase_s), free_port())
 
 
 def connect(robot) -> BridgeTables:
@@ -132,8 +130,9 @@ def test_a_profile_holds_the_arm_on_the_robot_s_loop(robot):
 
     def send_profile():
         t = robot.bridge.server_now_us()
-        robot.bridge.send_command(encode_profile(ProfileCommand(
-            t, PERIOD_S, (hold,), ((0.0, 0.0),), (feedforward(t * 1e-6, hold, (0.0, 0.0)),))))
+        setpoint = Setpoint(hold, (0.0, 0.0), feedforward(t * 1e-6, hold, (0.0, 0.0)))
+        robot.bridge.send_command(encode_profile(profile_command(t, Profile(
+            0.0, PERIOD_S, ((90.0, 4.0), (75.0, 3.0)), (setpoint,)))))
     loops(robot, 1.5, send_profile)
     assert not robot.plant.resting
     assert np.max(np.abs(np.array(robot.plant.state[:2]) - hold)) < math.radians(1.0)

@@ -1,11 +1,17 @@
 """The contract's double[] layouts to and from plain values (``contract.READING_LAYOUT``,
 ``VOLTAGE_LAYOUT``, ``PROFILE_HEAD`` + ``PROFILE_POINT``): one place that packs and checks
-them, for the robot, the bridge, the tests and the benches."""
+them, for the robot, the bridge, the tests and the benches.
 
-from dataclasses import dataclass
+A profile on NT is ``arm_control.model.profile``'s layout with its start (data[0]) as the
+NT server clock's µs instead of the sender's seconds; decoded, it is a ``Profile`` whose
+``start_s`` is on the NT server clock, which the robot plays with ``ProfilePlayer``.
+"""
+
+from dataclasses import dataclass, replace
 import math
 
 from arm_control.frc import contract as nt
+from arm_control.model import profile as profiles
 
 NAN_PAIR = (math.nan, math.nan)
 
@@ -35,14 +41,22 @@ class VoltageCommand:
 
 @dataclass(frozen=True)
 class ProfileCommand:
-    """Setpoints k = 0..n-1 for the instants ``time_us + k·period_s``, each with the model's
-    feedforward voltage."""
+    """A profile whose setpoint 0 is for ``time_us`` (NT server clock): ``profile.start_s``
+    is the same instant in seconds."""
 
     time_us: int
-    period_s: float
-    position_rad: tuple[tuple[float, float], ...]
-    velocity_rad_s: tuple[tuple[float, float], ...]
-    feedforward_v: tuple[tuple[float, float], ...]
+    profile: profiles.Profile
+
+    @property
+    def end_us(self) -> int:
+        """When its last setpoint applies."""
+        return self.time_us + round((len(self.profile.setpoints) - 1) * self.profile.step_s
+                                    * 1e6)
+
+
+def profile_command(time_us: int, profile: profiles.Profile) -> ProfileCommand:
+    """``profile`` (its start on any clock) as a command for ``time_us`` on NT's."""
+    return ProfileCommand(int(time_us), replace(profile, start_s=time_us * 1e-6))
 
 
 def encode_reading(reading: Reading) -> list[float]:
@@ -76,27 +90,24 @@ def encode_voltage(time_us: int, voltage_v) -> list[float]:
     return [float(time_us), float(voltage_v[0]), float(voltage_v[1])]
 
 
-def encode_profile(profile: ProfileCommand) -> list[float]:
-    values = [float(profile.time_us), float(profile.period_s)]
-    for point in zip(profile.position_rad, profile.velocity_rad_s, profile.feedforward_v):
-        values += [float(v) for pair in point for v in pair]
-    return values
+def encode_profile(command: ProfileCommand) -> list[float]:
+    data = profiles.encode(command.profile)[2]
+    return [float(command.time_us)] + data[1:]
 
 
 def decode_command(values) -> VoltageCommand | ProfileCommand:
-    """A voltage pair (3 values) or a profile (2 + 6·n, n ≥ 1); ValueError otherwise."""
+    """A voltage pair (3 values) or a profile (6 + 6·n, n ≥ 1); ValueError otherwise."""
     values = [float(v) for v in values]
     if not values or not all(math.isfinite(v) for v in values):
         raise ValueError(f'{nt.COMMAND.name}: expected finite numbers, got {values}')
     time_us = int(values[0])
     if len(values) == nt.VOLTAGE_SIZE:
         return VoltageCommand(time_us, (values[1], values[2]))
-    points = len(values) - nt.PROFILE_HEAD_SIZE
-    if points <= 0 or points % nt.PROFILE_POINT_SIZE or not values[1] > 0.0:
-        raise ValueError(f'{nt.COMMAND.name}: expected 3 values (a voltage pair) or 2 + 6·n '
-                         f'with a positive period (a profile), got {len(values)} values, '
-                         f'period {values[1] if len(values) > 1 else None}')
-    rows = [values[i:i + nt.PROFILE_POINT_SIZE]
-            for i in range(nt.PROFILE_HEAD_SIZE, len(values), nt.PROFILE_POINT_SIZE)]
-    return ProfileCommand(time_us, values[1], tuple((r[0], r[1]) for r in rows),
-                          tuple((r[2], r[3]) for r in rows), tuple((r[4], r[5]) for r in rows))
+    points = (len(values) - nt.PROFILE_HEAD_SIZE) // nt.PROFILE_POINT_SIZE
+    dims = [(profiles.SETPOINT_LABEL, points, 6 * points), (profiles.FIELDS_LABEL, 6, 6)]
+    try:
+        profile = profiles.decode([time_us * 1e-6] + values[1:], dims, profiles.DATA_OFFSET)
+    except profiles.ProfileError as error:
+        raise ValueError(f'{nt.COMMAND.name}: not 3 values (a voltage pair) nor a profile: '
+                         f'{error}') from error
+    return ProfileCommand(time_us, profile)

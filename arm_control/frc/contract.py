@@ -71,17 +71,20 @@ READING_LAYOUT = _layout(
 READING_SIZE = sum(field.size for field in READING_LAYOUT)
 READING_FIELD = {field.name: field for field in READING_LAYOUT}
 
-# A command: a voltage pair, or a profile of setpoints the robot plays at its own loop.
+# A command: a voltage pair, or a profile of setpoints the robot plays at its own loop
+# (arm_control.model.profile's layout, its start on the NT server clock in µs).
 COMMAND_HEAD = _layout(
-    ('time_us', 1, 'µs', 'the instant the command is for (a profile: its first setpoint), on '
-     'the NT server clock; also when it expires: time_us + command timeout'),
+    ('time_us', 1, 'µs', 'the instant the command is for (a profile: its setpoint 0), on the '
+     'NT server clock'),
 )
 VOLTAGE_LAYOUT = COMMAND_HEAD + _layout(
-    ('voltage_v', 2, 'V', 'motor voltages to apply from time_us on, clamped to the '
-     'battery'), start=1)
+    ('voltage_v', 2, 'V', 'motor voltages to apply from time_us on, clamped to the battery, '
+     'until time_us + the command timeout'), start=1)
 VOLTAGE_SIZE = 3
-PROFILE_HEAD = COMMAND_HEAD + (
-    Field('period_s', 1, 1, 's', 'setpoint k is for time_us + k·period_s'),)
+PROFILE_HEAD = COMMAND_HEAD + _layout(
+    ('step_s', 1, 's', 'setpoint k is for time_us + k·step_s (the robot loop period)'),
+    ('shoulder_pd', 2, 'V/rad, V·s/rad', 'kp, kd the robot closes the shoulder with'),
+    ('elbow_pd', 2, 'V/rad, V·s/rad', 'kp, kd for the elbow'), start=1)
 PROFILE_POINT = _layout(
     ('position_rad', 2, 'rad', "setpoint k's position"),
     ('velocity_rad_s', 2, 'rad/s', "setpoint k's velocity"),
@@ -89,7 +92,7 @@ PROFILE_POINT = _layout(
      'its PD feedback on its fresh reading'),
 )
 PROFILE_POINT_SIZE = 6
-PROFILE_HEAD_SIZE = 2
+PROFILE_HEAD_SIZE = 6
 
 
 def _robot(name, type_, unit, meaning, rate='every robot loop (50 Hz)'):
@@ -101,7 +104,7 @@ READING = _robot('reading', 'double[]', 'see the layout',
                  'were read')
 COMMAND = NtTopic('/arm/command/motors', 'double[]', 'see the layout', 'bridge',
                   'each controller period (50 Hz), flushed at once',
-                  'a voltage pair (3 values) or a profile (2 + 6·n values) for the robot to '
+                  'a voltage pair (3 values) or a profile (6 + 6·n values) for the robot to '
                   'apply at its loop: the "command" layouts')
 ARM_STATE = NtTopic('/arm/coprocessor/state', 'string', '', 'bridge', 'on change',
                     "the controller's state (arm_state): for dashboards, LEDs, autonomous")
@@ -150,5 +153,5 @@ def layout_tables() -> str:
         layout_table('reading', READING_LAYOUT),
         layout_table('voltage command', VOLTAGE_LAYOUT),
         layout_table('profile command', PROFILE_HEAD),
-        layout_table('profile setpoint k', PROFILE_POINT, '2 + 6·k + '),
+        layout_table('profile setpoint k', PROFILE_POINT, '6 + 6·k + '),
     ])

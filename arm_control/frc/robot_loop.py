@@ -5,11 +5,13 @@ At each loop instant t_k (NT server clock, seconds):
 1. the arm has run from t_{k-1} to t_k under the voltage set at t_{k-1} (0 V from its
    command's expiry on, if that came first);
 2. the sensors are read: one reading, stamped t_k;
-3. the newest command that has *arrived* by t_k is taken (refused if already past its
-   expiry, ``time_us + command_timeout_s``);
+3. the commands that have *arrived* by t_k are taken, newest last (one not newer than the
+   command held, or already past its expiry, is refused);
 4. the voltage from t_k on: a voltage pair as it is; a profile played at t_k on the fresh
-   reading (its setpoint for t_k, V = V_ff + kp·(θ_sp − θ) + kd·(θ̇_sp − θ̇)); 0 V while
-   disabled or once the command has expired.
+   reading by ``model.profile.ProfilePlayer`` (its setpoint for t_k,
+   V = V_ff + kp·(θ_sp − θ) + kd·(θ̇_sp − θ̇)); 0 V while disabled or once the newest
+   command has expired: a pair at ``time_us + command_timeout_s``, a profile at its last
+   setpoint's instant + ``command_timeout_s`` (played to its end, its last setpoint held).
 
 So a command acts from the first loop after it arrived, never before, and never past its
 expiry. No ntcore here: ``robot_sim`` feeds it what NT delivered.
@@ -20,27 +22,17 @@ import math
 from arm_control.frc.codec import ProfileCommand, Reading, VoltageCommand
 from arm_control.frc.conversions import clamp_voltage
 from arm_control.frc.rules import ZERO_V
-
-
-def play_profile(profile: ProfileCommand, now_s: float, position, velocity,
-                 gains) -> tuple[float, float]:
-    """The profile's setpoint for ``now_s`` (the last one past its end) closed by PD."""
-    k = math.floor((now_s - profile.time_us * 1e-6) / profile.period_s + 1e-6)
-    k = min(max(k, 0), len(profile.position_rad) - 1)
-    return tuple(
-        ff + kp * (q_sp - q) + kd * (qd_sp - qd) for ff, (kp, kd), q_sp, q, qd_sp, qd in zip(
-            profile.feedforward_v[k], gains, profile.position_rad[k], position,
-            profile.velocity_rad_s[k], velocity))
+from arm_control.model.profile import ProfilePlayer
 
 
 class RobotLoop:
     """The loop of steps 1-4 over ``plant`` (an ``ArmPlant``)."""
 
-    def __init__(self, plant, gains, max_voltage: float, command_timeout_s: float):
+    def __init__(self, plant, max_voltage: float, command_timeout_s: float):
         if not command_timeout_s > 0.0:
             raise ValueError(f'command timeout must be > 0 s, got {command_timeout_s}')
         self.plant = plant
-        self.gains = tuple(gains)               # ((kp V/rad, kd V s/rad), ...) per joint
+        self.player = ProfilePlayer(max_voltage)
         self.max_voltage = max_voltage
         self.timeout_s = command_timeout_s
         self.command = None                     # the command held, or None
@@ -50,7 +42,8 @@ class RobotLoop:
         self.refused = []                       # (loop time, command, why) since last asked
 
     def expires_s(self, command) -> float:
-        return command.time_us * 1e-6 + self.timeout_s
+        last_us = command.end_us if isinstance(command, ProfileCommand) else command.time_us
+        return last_us * 1e-6 + self.timeout_s
 
     def take(self, now_s: float, arrived) -> None:
         """Step 3: hold the newest of ``arrived`` (commands, oldest first) if it is newer
@@ -61,6 +54,12 @@ class RobotLoop:
             elif now_s >= self.expires_s(command):
                 self.refused.append((now_s, command, 'stale'))
             else:
+                if isinstance(command, ProfileCommand):
+                    if not isinstance(self.command, ProfileCommand):
+                        self.player.clear()
+                    self.player.offer(command.profile)
+                else:
+                    self.player.clear()
                 self.command = command
 
     def step(self, now_s: float, enabled: bool, arrived=()):
@@ -80,14 +79,14 @@ class RobotLoop:
             self.take(now_s, arrived)
         else:
             self.command = None
-        command = self.command
-        if command is None or now_s >= self.expires_s(command):
+            self.player.clear()
+        command, voltage = self.command, None
+        if command is not None and now_s < self.expires_s(command):
+            voltage = command.voltage_v if isinstance(command, VoltageCommand) else \
+                self.player.volts(now_s, position, velocity)
+        if voltage is None:
             self.voltage, self.voltage_until_s = ZERO_V, math.inf
         else:
-            if isinstance(command, VoltageCommand):
-                voltage = command.voltage_v
-            else:
-                voltage = play_profile(command, now_s, position, velocity, self.gains)
             self.voltage = clamp_voltage(voltage, self.max_voltage)
             self.voltage_until_s = self.expires_s(command)
         if self.plant.resting and any(v != 0.0 for v in self.voltage):

@@ -4,8 +4,9 @@ It serves NT4 on 127.0.0.1 only and runs a robot loop as the contract says a rob
 (``robot_loop.RobotLoop``): at instants phase + k·period of the NT server clock it reads the
 simulated arm's sensors (``ArmPlant``, noise and all), publishes them as one reading stamped
 with that instant, and applies the newest command that has arrived: a voltage pair, or a
-profile played on the fresh reading with the controller's kp and kd. A command drives the
-motors until its own instant + ``command_timeout_s``, then 0 V. It honours enable and disable
+profile played on the fresh reading with the profile's own kp and kd. A command drives the
+motors until its own instant (a profile's: its last setpoint's) + ``command_timeout_s``,
+then 0 V. It honours enable and disable
 (``/arm/sim/enable``, as the Driver Station would). As in ``sim``, the arm rests on its stow
 support until the first voltage that is not zero; the battery sags and the motor
 controllers limit the current, as ``sim``'s.
@@ -40,15 +41,15 @@ class RobotStandIn:
     loop instant, or ``run``)."""
 
     def __init__(self, arm: config.ArmConfig, sim: config.SimConfig,
-                 robot: FrcRobotSimConfig, gains, port: int):
+                 robot: FrcRobotSimConfig, port: int):
         self.arm = arm
         self.robot = robot
         seed = None if sim.random_seed < 0 else sim.random_seed
         self.plant = ArmPlant(arm, sim.initial_position, sim.physics_step_s, seed)
         if sim.rest_until_first_command:
             self.plant.rest()
-        self.loop = RobotLoop(self.plant, tuple((kp, kd) for kp, _, kd in gains),
-                              arm.battery.nominal_voltage, robot.command_timeout_s)
+        self.loop = RobotLoop(self.plant, arm.battery.nominal_voltage,
+                              robot.command_timeout_s)
         self.enabled = robot.start_enabled
         self.port = port
         self.tables = RobotTables(ntcore.NetworkTableInstance.create(), port)
@@ -131,13 +132,11 @@ def main(argv=None) -> int:
                         format='[%(levelname)s] [%(name)s]: %(message)s')
     try:
         arm, sim = config.load('sim', *args.params_file)
-        controller = config.load('controller', *args.params_file)[1]
         robot = load_robot_sim(*args.params_file)
         if args.phase_s is not None:
             robot = robot.with_phase(args.phase_s)
         port = robot.nt_port if args.port is None else args.port
-        stand_in = RobotStandIn(arm, sim, robot, (controller.shoulder_pid, controller.elbow_pid),
-                                port)
+        stand_in = RobotStandIn(arm, sim, robot, port)
     except (ParameterError, OSError) as error:
         log.critical(f'cannot start: {error}')
         return 2

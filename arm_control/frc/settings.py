@@ -4,6 +4,7 @@
 from dataclasses import dataclass, replace
 from typing import Any, Mapping
 
+from arm_control.model.profile import MAX_KD_V_S_PER_RAD, MAX_KP_V_PER_RAD
 from arm_control.parameters import ParameterError, read_parameter_files, Reader
 
 MODES = ('voltage', 'setpoint')
@@ -38,6 +39,7 @@ class FrcBridgeConfig:
     server_address: str
     nt_port: int
     mode: str
+    setpoint_gains: tuple[tuple[float, float], tuple[float, float]]   # ((kp, kd), (kp, kd))
     reading_timeout_s: float
     wpilog_path: str
 
@@ -62,8 +64,17 @@ class FrcBridgeConfig:
         mode = _string(params, 'mode')
         if mode not in MODES:
             raise ParameterError(f"parameter 'mode' = {mode!r}: expected one of {list(MODES)}")
+        gains = []
+        for name in ('shoulder_pd', 'elbow_pd'):
+            kp, kd = read.numbers(name, 2)
+            if not (0.0 <= kp <= MAX_KP_V_PER_RAD and 0.0 <= kd <= MAX_KD_V_S_PER_RAD):
+                raise ParameterError(f"parameter '{name}' = {[kp, kd]}: expected kp within "
+                                     f'[0, {MAX_KP_V_PER_RAD:g}] V/rad and kd within '
+                                     f'[0, {MAX_KD_V_S_PER_RAD:g}] V s/rad')
+            gains.append((kp, kd))
         return cls(team_number=team, server_address=address, nt_port=_port(read, 'nt_port'),
-                   mode=mode, reading_timeout_s=read.positive('reading_timeout_s'),
+                   mode=mode, setpoint_gains=tuple(gains),
+                   reading_timeout_s=read.positive('reading_timeout_s'),
                    wpilog_path=_string(params, 'wpilog_path'))
 
 

@@ -4,9 +4,10 @@ An NT4 client (pyntcore) of the roboRIO, found by team number or address. Each o
 robot's readings (one NT value per robot loop) becomes ``joint_states``, ``motor_encoders``
 (JointState), ``battery_state`` (BatteryState) and ``motor_currents`` (Float64MultiArray),
 all stamped with the instant the robot read its sensors. ``voltage_command`` goes to the
-robot as a command for the instant it is sent (mode ``voltage``), or the controller's
-``controller/setpoint`` with the model's feedforward as a one-setpoint profile for its
-stamp (mode ``setpoint``), flushed at once. A disabled robot, a dropped connection, or one
+robot, flushed at once: a voltage pair as a command for the instant it is sent, a profile
+(``model.profile``) with its start on the robot's clock; in mode ``setpoint``, instead of
+the controller's voltages, its ``controller/setpoint`` with the model's feedforward as a
+one-setpoint profile for its stamp. A disabled robot, a dropped connection, or one
 whose readings stop for ``reading_timeout_s`` (an error) gets 0 V. The controller is
 disabled and enabled with the robot (``controller/enable``); when the robot is lost, its
 joint states stop, and it stops commanding on its own. Draws the arm as a Mechanism2d on NT
@@ -30,7 +31,7 @@ from std_srvs.srv import SetBool
 
 from arm_control.config import ArmConfig, JOINT_NAMES
 from arm_control.frc import contract as nt
-from arm_control.frc.codec import decode_reading, encode_profile, encode_voltage, ProfileCommand
+from arm_control.frc.codec import decode_reading, encode_profile, encode_voltage, profile_command
 from arm_control.frc.conversions import (battery_state_current_a, clamp_voltage, commanding,
                                          joint_effort_nm, joint_pair, ros_stamp_ns,
                                          SetpointFeedforward)
@@ -40,6 +41,7 @@ from arm_control.frc.settings import FrcBridgeConfig
 from arm_control.frc.tables import BridgeTables, DRAW_PERIOD_S, now_us
 from arm_control.frc.wpilog import (BRIDGE_EVENTS, CONTROLLER_SETPOINT,
                                     CONTROLLER_SETPOINT_VELOCITY, CONTROLLER_VOLTAGE, RunLog)
+from arm_control.model import profile as profiles
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.nodes.common import (COMMANDS, declare_parameters, LATCHED, run,
                                       STATE_STREAM, status)
@@ -203,22 +205,35 @@ class FrcBridgeNode(Node):
     # ------------------------------------------------------------------ ROS -> robot
 
     def on_voltage(self, msg: Float64MultiArray) -> None:
+        """A voltage pair or a profile (``model.profile``): to the robot, for its instant."""
         try:
-            voltage = clamp_voltage(joint_pair(msg.data, 'voltage_command'),
-                                    self.arm.battery.nominal_voltage)
-        except ValueError as error:
+            command = profiles.decode_command(
+                msg.data, [(d.label, d.size, d.stride) for d in msg.layout.dim],
+                msg.layout.data_offset)
+        except profiles.ProfileError as error:
             self.refuse('voltage_command',
-                        f'ignored {error}; the robot stops on its own when commands stop')
+                        f'ignored voltage_command: {error}; the robot stops on its own when '
+                        'commands stop')
             return
+        if isinstance(command, profiles.Profile):
+            if self.link.may_command:
+                start_us = self.server_time_us(round(command.start_s * 1e9))
+                self.send(encode_profile(profile_command(start_us, command)))
+            else:
+                self.send(encode_voltage(self.tables.server_now_us(), ZERO_V))
+            self.record(CONTROLLER_VOLTAGE, list(msg.data))
+            return
+        voltage = clamp_voltage(command, self.arm.battery.nominal_voltage)
         outgoing = self.link.outgoing(voltage)
         if self.config.mode == 'voltage' or not commanding(outgoing):
             self.send(encode_voltage(self.tables.server_now_us(), outgoing))
         elif self.setpoint is not None and \
                 self.now_s() - self.setpoint[3] <= SETPOINT_MAX_AGE_S:
             position, velocity, feedforward_v, _, stamp_ns = self.setpoint
-            self.send(encode_profile(ProfileCommand(
-                self.server_time_us(stamp_ns), nt.LOOP_PERIOD_S, (position,), (velocity,),
-                (feedforward_v,))))
+            self.send(encode_profile(profile_command(
+                self.server_time_us(stamp_ns), profiles.Profile(
+                    0.0, nt.LOOP_PERIOD_S, self.config.setpoint_gains,
+                    (profiles.Setpoint(position, velocity, feedforward_v),)))))
         # else nothing: no fresh setpoint, and the robot's own timeout stops it
         self.record(CONTROLLER_VOLTAGE, voltage)
 

@@ -22,11 +22,10 @@ import edu.wpi.first.wpilibj.motorcontrol.PWMTalonSRX;
 public class Robot extends TimedRobot {
   static final double GEAR_RATIO = 159.3;           // motor turns per joint turn
   static final double ENCODER_CPR = 2048;           // encoder counts per motor turn
-  static final long COMMAND_TIMEOUT_US = 100_000;   // a command drives until time_us + this
-  static final double[] KP = {90.0, 75.0};          // profile feedback: V/rad
-  static final double[] KD = {4.0, 3.0};            // V s/rad
-  static final int VOLTAGE_SIZE = 3;                // [time_us, V_s, V_e] ...
-  static final int PROFILE_HEAD = 2, PROFILE_POINT = 6;  // ... or [time_us, period_s, (q, qd, ff)...]
+  static final long COMMAND_TIMEOUT_US = 100_000;   // drives until its last instant + this
+  static final int VOLTAGE_SIZE = 3;                // [time_us, V_s, V_e], or
+  static final int PROFILE_HEAD = 6, PROFILE_POINT = 6;  // [time_us, step_s, kp_s, kd_s, kp_e,
+  // kd_e, then (q_s, q_e, qd_s, qd_e, ff_s, ff_e) per setpoint]
 
   final NetworkTableInstance nt = NetworkTableInstance.getDefault();
   final PubSubOption[] fast = {
@@ -36,7 +35,8 @@ public class Robot extends TimedRobot {
       nt.getDoubleArrayTopic("/arm/robot/reading").publish(fast);
   final DoubleArraySubscriber commandSub =
       nt.getDoubleArrayTopic("/arm/command/motors").subscribe(new double[] {}, fast);
-  double[] held = null;                             // the newest command taken
+  double[] held = null;                             // the command in force
+  final java.util.ArrayList<double[]> pending = new java.util.ArrayList<>();  // not begun yet
 
   final PWMTalonSRX[] shoulderMotors = {new PWMTalonSRX(0), new PWMTalonSRX(1)};
   final PWMTalonSRX elbowMotor = new PWMTalonSRX(2);
@@ -57,18 +57,37 @@ public class Robot extends TimedRobot {
         || (c.length > PROFILE_HEAD && (c.length - PROFILE_HEAD) % PROFILE_POINT == 0 && c[1] > 0);
   }
 
-  /** A held command's voltage now: a pair as it is; a profile's setpoint for now (the last
-   * past its end) closed by PD on this loop's reading. */
+  static int points(double[] c) {
+    return (c.length - PROFILE_HEAD) / PROFILE_POINT;
+  }
+
+  /** A pair acts on arrival; a profile from half a step before its setpoint 0. */
+  static double beginsUs(double[] c) {
+    return c.length == VOLTAGE_SIZE ? Double.NEGATIVE_INFINITY : c[0] - 0.5e6 * c[1];
+  }
+
+  /** A pair at its instant + the timeout; a profile at its last setpoint's + the timeout. */
+  static double expiresUs(double[] c) {
+    double lastUs = c.length == VOLTAGE_SIZE ? c[0] : c[0] + 1e6 * c[1] * (points(c) - 1);
+    return lastUs + COMMAND_TIMEOUT_US;
+  }
+
+  /** A pair as it is. A profile: setpoint k nearest now, q_sp = q_k + qd_k (t - t_k) (past
+   * the last, that one held at rest), V = ff_k + kp (q_sp - q) + kd (qd_sp - qd). */
   static double[] voltageFor(double[] c, long nowUs, double[] q, double[] qd) {
     if (c.length == VOLTAGE_SIZE) {
       return new double[] {c[1], c[2]};
     }
-    int points = (c.length - PROFILE_HEAD) / PROFILE_POINT;
-    int k = (int) Math.floor((nowUs - c[0]) * 1e-6 / c[1] + 1e-6);
-    int b = PROFILE_HEAD + PROFILE_POINT * Math.min(Math.max(k, 0), points - 1);
+    double step = c[1], since = (nowUs - c[0]) * 1e-6;
+    int k = (int) Math.min(Math.max(Math.floor(since / step + 0.5), 0), points(c) - 1);
+    int b = PROFILE_HEAD + PROFILE_POINT * k;
+    double tau = Math.min(Math.max(since - k * step, -0.5 * step), 0.5 * step);
+    boolean atRest = k == points(c) - 1 && since - k * step > 0.5 * step;
     double[] v = new double[2];
     for (int j = 0; j < 2; j++) {
-      v[j] = c[b + 4 + j] + KP[j] * (c[b + j] - q[j]) + KD[j] * (c[b + 2 + j] - qd[j]);
+      double qdSp = atRest ? 0.0 : c[b + 2 + j];
+      v[j] = c[b + 4 + j] + c[2 + 2 * j] * (c[b + j] + qdSp * tau - q[j])
+          + c[3 + 2 * j] * (qdSp - qd[j]);
     }
     return v;
   }
@@ -86,22 +105,29 @@ public class Robot extends TimedRobot {
     double bus = RobotController.getBatteryVoltage();
     boolean enabled = DriverStation.isEnabled();
 
-    // 2. The newest command that has arrived: taken if newer than the one held and not past
-    //    its expiry; dropped while disabled.
+    // 2. The commands that have arrived: kept if newer than the one in force and not past
+    //    expiry; the newest begun is in force. Disabled: none.
     for (TimestampedDoubleArray value : commandSub.readQueue()) {
       double[] c = value.value;
-      if (enabled && isCommand(c) && nowUs < c[0] + COMMAND_TIMEOUT_US
-          && (held == null || c[0] > held[0])) {
+      if (isCommand(c) && nowUs < expiresUs(c) && (held == null || c[0] > held[0])) {
+        pending.add(c);
+      }
+    }
+    for (double[] c : pending) {
+      if (nowUs >= beginsUs(c) && (held == null || c[0] > held[0])) {
         held = c;
       }
     }
+    final double[] inForce = held;
+    pending.removeIf(c -> inForce != null && c[0] <= inForce[0]);
     if (!enabled) {
       held = null;
+      pending.clear();
     }
 
-    // 3. The voltage from now on: 0 V once the command held is past its expiry.
+    // 3. The voltage from now on: 0 V once the command in force is past its expiry.
     double[] v = {0.0, 0.0};
-    if (held != null && nowUs < held[0] + COMMAND_TIMEOUT_US) {
+    if (held != null && nowUs < expiresUs(held)) {
       v = voltageFor(held, nowUs, q, qd);
     }
     for (int j = 0; j < 2; j++) {

@@ -11,32 +11,47 @@ import wpilib
 
 GEAR_RATIO = 159.3                   # motor turns per joint turn
 ENCODER_CPR = 2048                   # encoder counts per motor turn
-COMMAND_TIMEOUT_US = 100_000         # a command drives until its time_us + this, then 0 V
-KP = (90.0, 75.0)                    # profile feedback: V/rad, [shoulder, elbow]
-KD = (4.0, 3.0)                      # V s/rad
+COMMAND_TIMEOUT_US = 100_000         # a command drives until its last instant + this, then 0 V
 READING_SIZE = 14                    # the reading layout: see docs/frc_bridge.md
 VOLTAGE_SIZE = 3                     # a command: [time_us, V_s, V_e] ...
-PROFILE_HEAD, PROFILE_POINT = 2, 6   # ... or [time_us, period_s, (q, qd, ff) per setpoint]
+PROFILE_HEAD, PROFILE_POINT = 6, 6   # ... or [time_us, step_s, kp_s, kd_s, kp_e, kd_e,
+#                                          then (q_s, q_e, qd_s, qd_e, ff_s, ff_e) per setpoint]
 
 
-def voltage_for(command, now_us, position, velocity):
-    """A held command's voltage at now_us: a pair as it is; a profile's setpoint for now_us
-    (the last one past its end) closed by PD on this loop's reading."""
-    if len(command) == VOLTAGE_SIZE:
-        return [command[1], command[2]]
-    points = (len(command) - PROFILE_HEAD) // PROFILE_POINT
-    k = math.floor((now_us - command[0]) * 1e-6 / command[1] + 1e-6)
-    base = PROFILE_HEAD + PROFILE_POINT * min(max(k, 0), points - 1)
-    q_sp, qd_sp, ff = (command[base:base + 2], command[base + 2:base + 4],
-                       command[base + 4:base + 6])
-    return [ff[j] + KP[j] * (q_sp[j] - position[j]) + KD[j] * (qd_sp[j] - velocity[j])
-            for j in range(2)]
+def is_command(c):
+    return len(c) == VOLTAGE_SIZE or (len(c) > PROFILE_HEAD and c[1] > 0.0 and
+                                      (len(c) - PROFILE_HEAD) % PROFILE_POINT == 0)
 
 
-def is_command(values):
-    return len(values) == VOLTAGE_SIZE or (
-        len(values) > PROFILE_HEAD and (len(values) - PROFILE_HEAD) % PROFILE_POINT == 0
-        and values[1] > 0.0)
+def points(c):
+    return (len(c) - PROFILE_HEAD) // PROFILE_POINT
+
+
+def begins_us(c):
+    """A pair acts on arrival; a profile from half a step before its setpoint 0."""
+    return -math.inf if len(c) == VOLTAGE_SIZE else c[0] - 0.5e6 * c[1]
+
+
+def expires_us(c):
+    """A pair at its instant + the timeout; a profile at its last setpoint's + the timeout."""
+    last_us = c[0] if len(c) == VOLTAGE_SIZE else c[0] + 1e6 * c[1] * (points(c) - 1)
+    return last_us + COMMAND_TIMEOUT_US
+
+
+def voltage_for(c, now_us, position, velocity):
+    """A pair as it is. A profile: setpoint k nearest now, q_sp = q_k + qd_k·(t − t_k) (past
+    the last, that one held at rest), V = ff_k + kp·(q_sp − q) + kd·(qd_sp − qd)."""
+    if len(c) == VOLTAGE_SIZE:
+        return [c[1], c[2]]
+    step_s, since_s = c[1], (now_us - c[0]) * 1e-6
+    k = min(max(math.floor(since_s / step_s + 0.5), 0), points(c) - 1)
+    b = PROFILE_HEAD + PROFILE_POINT * k
+    q_sp, qd_sp, ff = c[b:b + 2], c[b + 2:b + 4], c[b + 4:b + 6]
+    tau_s = min(max(since_s - k * step_s, -0.5 * step_s), 0.5 * step_s)
+    if k == points(c) - 1 and since_s - k * step_s > 0.5 * step_s:
+        qd_sp = [0.0, 0.0]
+    return [ff[j] + c[2 + 2 * j] * (q_sp[j] + qd_sp[j] * tau_s - position[j])
+            + c[3 + 2 * j] * (qd_sp[j] - velocity[j]) for j in range(2)]
 
 
 class Robot(wpilib.TimedRobot):
@@ -47,7 +62,8 @@ class Robot(wpilib.TimedRobot):
         self.reading_pub = nt.getDoubleArrayTopic('/arm/robot/reading').publish(fast)
         self.command_sub = nt.getDoubleArrayTopic('/arm/command/motors').subscribe([], fast)
         self.state_sub = nt.getStringTopic('/arm/coprocessor/state').subscribe('')
-        self.held = None                     # the newest command taken
+        self.held = None                     # the command in force
+        self.pending = []                    # arrived, newer, not begun yet
 
         self.shoulder_motors = [wpilib.PWMTalonSRX(0), wpilib.PWMTalonSRX(1)]
         self.elbow_motor = wpilib.PWMTalonSRX(2)
@@ -71,19 +87,23 @@ class Robot(wpilib.TimedRobot):
         bus = wpilib.RobotController.getBatteryVoltage()
         enabled = wpilib.DriverStation.isEnabled()
 
-        # 2. The newest command that has arrived: taken if newer than the one held and not
-        #    past its expiry; dropped while disabled.
+        # 2. The commands that have arrived: kept if newer than the one in force and not
+        #    past expiry; the newest begun is in force. Disabled: none.
         for value in self.command_sub.readQueue():
-            command = list(value.value)
-            if enabled and is_command(command) and now_us < command[0] + COMMAND_TIMEOUT_US \
-                    and (self.held is None or command[0] > self.held[0]):
-                self.held = command
+            c = list(value.value)
+            if is_command(c) and now_us < expires_us(c) and \
+                    (self.held is None or c[0] > self.held[0]):
+                self.pending.append(c)
+        begun = [c for c in self.pending if now_us >= begins_us(c)]
+        if begun:
+            self.held = max(begun, key=lambda c: c[0])
+            self.pending = [c for c in self.pending if c[0] > self.held[0]]
         if not enabled:
-            self.held = None
+            self.held, self.pending = None, []
 
-        # 3. The voltage from now on: 0 V once the command held is past its expiry.
+        # 3. The voltage from now on: 0 V once the command in force is past its expiry.
         voltage = [0.0, 0.0]
-        if self.held is not None and now_us < self.held[0] + COMMAND_TIMEOUT_US:
+        if self.held is not None and now_us < expires_us(self.held):
             voltage = voltage_for(self.held, now_us, position, velocity)
         battery = max(bus, 0.0)
         voltage = [min(max(v, -battery), battery) for v in voltage]
