@@ -29,6 +29,7 @@ from arm_control.frc.robot_loop import loop_instants, RobotLoop
 from arm_control.frc.settings import FrcRobotSimConfig, load_robot_sim
 from arm_control.frc.tables import LOOPBACK, now_us, RobotTables
 from arm_control.model.plant import ArmPlant
+from arm_control.nodes.realtime import raise_process
 from arm_control.parameters import ParameterError
 
 LOG_EVERY_S = 1.0           # the same complaint at most this often
@@ -56,6 +57,8 @@ class RobotStandIn:
         self.enable_seen_us = 0
         self.driving = False            # a command drove the motors after the last loop
         self.complained_s = {}
+        self.phase_s = robot.loop_phase_s   # may change while it runs, as a match drifts
+        self.observer = None            # observer(reading, true_state) after each loop
 
     @property
     def voltage(self) -> tuple[float, float]:
@@ -100,18 +103,20 @@ class RobotStandIn:
                           f'{self.loop.timeout_s:g} s: 0 V')
         self.driving = driving
         self.tables.publish(encode_reading(reading), truth, time_us)
+        if self.observer is not None:
+            self.observer(reading, truth)
 
     def run(self, stop: threading.Event) -> None:
         """Tick at the loop's instants (phase + k·period on the NT server clock) until
         ``stop`` is set; a late loop runs late, once, and the next keeps the phase."""
-        period_s, phase_s = 1.0 / self.robot.loop_rate_hz, self.robot.loop_phase_s
-        next_s = loop_instants(phase_s, period_s, now_us() * 1e-6)
+        period_s = 1.0 / self.robot.loop_rate_hz
+        next_s = loop_instants(self.phase_s, period_s, now_us() * 1e-6)
         while not stop.is_set():
             stop.wait(max(0.0, next_s - now_us() * 1e-6))
             if stop.is_set():
                 break
             self.tick(now_us())
-            next_s = loop_instants(phase_s, period_s, max(next_s, now_us() * 1e-6))
+            next_s = loop_instants(self.phase_s, period_s, max(next_s, now_us() * 1e-6))
 
     def close(self) -> None:
         self.tables.close()
@@ -143,6 +148,9 @@ def main(argv=None) -> int:
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
+    problem = raise_process(robot.realtime_priority)       # the loop's and ntcore's threads
+    if problem:
+        log.warning(problem)
     log.info(f'serving NT4 on {LOOPBACK}:{port}; the arm at {list(sim.initial_position)} rad, '
              f"{'enabled' if robot.start_enabled else 'disabled'}, "
              f'{robot.loop_rate_hz:g} Hz loop at phase {robot.loop_phase_s:g} s')

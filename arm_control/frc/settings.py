@@ -42,6 +42,7 @@ class FrcBridgeConfig:
     setpoint_gains: tuple[tuple[float, float], tuple[float, float]]   # ((kp, kd), (kp, kd))
     reading_timeout_s: float
     wpilog_path: str
+    realtime_priority: int          # SCHED_FIFO priority of every thread; 0: normal
 
     @property
     def server(self) -> str:
@@ -75,6 +76,7 @@ class FrcBridgeConfig:
         return cls(team_number=team, server_address=address, nt_port=_port(read, 'nt_port'),
                    mode=mode, setpoint_gains=tuple(gains),
                    reading_timeout_s=read.positive('reading_timeout_s'),
+                   realtime_priority=read.integer('realtime_priority', low=0, high=98),
                    wpilog_path=_string(params, 'wpilog_path'))
 
 
@@ -87,6 +89,7 @@ class FrcRobotSimConfig:
     loop_phase_s: float
     command_timeout_s: float
     start_enabled: bool
+    realtime_priority: int          # SCHED_FIFO priority of every thread; 0: normal
 
     def with_phase(self, phase_s: float) -> 'FrcRobotSimConfig':
         return replace(self, loop_phase_s=_phase(phase_s, self.loop_rate_hz, 'loop_phase_s'))
@@ -101,6 +104,7 @@ class FrcRobotSimConfig:
             loop_phase_s=_phase(read.number('loop_phase_s'), rate_hz, 'loop_phase_s'),
             command_timeout_s=read.positive('command_timeout_s'),
             start_enabled=read.boolean('start_enabled'),
+            realtime_priority=read.integer('realtime_priority', low=0, high=98),
         )
 
 

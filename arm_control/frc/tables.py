@@ -78,14 +78,24 @@ class BridgeTables:
         self.command = _publisher(instance, nt.COMMAND)
         self.state = _publisher(instance, nt.ARM_STATE)
         self.drawing = ntcore.NetworkTableInstance.create() if drawing else None
+        self.identity, self.server = identity, (team_number, server_address, port)
         for client, name in ((instance, identity), (self.drawing, f'{identity} drawing')):
-            if client is None:
-                continue
-            client.startClient4(name)
-            if team_number:
-                client.setServerTeam(team_number, port)
-            else:
-                client.setServer(server_address, port)
+            if client is not None:
+                self._dial(client, name)
+
+    def _dial(self, client, name: str) -> None:
+        team_number, server_address, port = self.server
+        client.startClient4(name)
+        if team_number:
+            client.setServerTeam(team_number, port)
+        else:
+            client.setServer(server_address, port)
+
+    def redial(self) -> None:
+        """Try the server now: ntcore's own retries come about once a second; a restarted
+        client tries at once (its publishers, subscribers and listeners stay)."""
+        self.instance.stopClient()
+        self._dial(self.instance, self.identity)
 
     def connected(self) -> bool:
         return self.instance.isConnected()
@@ -126,9 +136,18 @@ class RobotTables:
         self.enable = _subscriber(instance, nt.SIM_ENABLE)
         # NT4 keeps "persistent" topics in a file; a stand-in keeps none.
         self._persist_dir = tempfile.TemporaryDirectory(prefix='frc_robot_sim_')
-        persist_file = Path(self._persist_dir.name) / 'networktables.json'
-        persist_file.write_text('[]')
-        instance.startServer(str(persist_file), LOOPBACK, 0, port)     # 0: no NT3 port
+        self._persist_file = Path(self._persist_dir.name) / 'networktables.json'
+        self._persist_file.write_text('[]')
+        self.port = port
+        self.serve()
+
+    def serve(self) -> None:
+        """Serve NT4 (again, after ``stop_serving``: a robot that comes back)."""
+        self.instance.startServer(str(self._persist_file), LOOPBACK, 0, self.port)  # 0: no NT3
+
+    def stop_serving(self) -> None:
+        """Drop every connection, as a robot that loses its network."""
+        self.instance.stopServer()
 
     def publish(self, reading_values, true_state, time_us: int) -> None:
         """One loop's reading (and the sim's truth), stamped ``time_us``, flushed at once."""

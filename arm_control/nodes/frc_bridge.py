@@ -43,6 +43,7 @@ from arm_control.frc.wpilog import (BRIDGE_EVENTS, CONTROLLER_SETPOINT,
                                     CONTROLLER_SETPOINT_VELOCITY, CONTROLLER_VOLTAGE, RunLog)
 from arm_control.model import profile as profiles
 from arm_control.model.dynamics import ArmDynamics
+from arm_control.nodes import realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, LATCHED, run,
                                       STATE_STREAM, status)
 from arm_control.parameters import ParameterError
@@ -50,6 +51,7 @@ from arm_control.parameters import ParameterError
 IDENTITY = 'frc_bridge'             # how the robot's NT server sees this client
 SETPOINT_MAX_AGE_S = 0.1            # mode setpoint: an older setpoint is not sent
 ENABLE_RETRY_S = 0.5                # controller/enable not there: ask again this often
+REDIAL_PERIOD_S = 0.2               # disconnected: try the robot again this often
 SHUTDOWN_SEND_S = 0.05              # on exit, the last 0 V gets this long to leave
 REFUSAL_LOG_PERIOD_S = 1.0          # bad input from one source is said at most this often
 LEVELS = {'info': DiagnosticStatus.OK, 'warning': DiagnosticStatus.WARN,
@@ -80,6 +82,7 @@ class FrcBridgeNode(Node):
         self.started = time.monotonic()
         self.setpoint = None            # (position, velocity, feedforward_v, received at, stamp)
         self.drawn_s = {'arm': -math.inf, 'setpoint': -math.inf}
+        self.reading_ages_ms = []       # sensors' instant -> taken here, since the last report
         self.counts = {'readings': 0, 'commands sent': 0, 'inputs refused': 0}
         self.counts_said = dict(self.counts)
         self.refused_said_s = {}        # when bad input from each source was last said
@@ -87,6 +90,7 @@ class FrcBridgeNode(Node):
         self.enable_call = None
         self.enable_asked_s = -math.inf
         self.connection_news = deque()  # from ntcore's listener thread
+        self.dialled_s = 0.0            # when the robot was last tried (or seen connected)
 
         self.joint_states_pub = self.create_publisher(JointState, 'joint_states', STATE_STREAM)
         self.encoders_pub = self.create_publisher(JointState, 'motor_encoders', STATE_STREAM)
@@ -113,6 +117,10 @@ class FrcBridgeNode(Node):
                                       ntcore.EventFlags.kValueRemote, lambda _: self.wake()),
             self.instance.addConnectionListener(False, self.on_connection)]
 
+        # Every thread there is now (ntcore's, DDS's, this one) at real-time priority.
+        problem = realtime.raise_process(self.config.realtime_priority)
+        if problem:
+            self.get_logger().warning(problem)
         self.create_timer(nt.LOOP_PERIOD_S, self.check_link)
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
@@ -178,6 +186,7 @@ class FrcBridgeNode(Node):
     def publish_reading(self, reading) -> None:
         """One robot loop's reading, whole: every message gets its one stamp."""
         self.counts['readings'] += 1
+        self.reading_ages_ms.append(1e-3 * (self.tables.server_now_us() - reading.time_us))
         header = self.ros_stamp(reading.time_us)
         current = reading.motor_current_a
         effort = list(joint_effort_nm(current, self.dynamics)) \
@@ -272,7 +281,13 @@ class FrcBridgeNode(Node):
     def check_link(self) -> None:
         if self.link.silent_s > 0.5 * self.config.reading_timeout_s:
             self.on_nt()        # what arrived while this process was busy is not lost time
-        self.on_link_event(self.link.check(self.now_s(), self.tables.connected()))
+        connected = self.tables.connected()
+        self.on_link_event(self.link.check(self.now_s(), connected))
+        if connected:
+            self.dialled_s = self.now_s()
+        elif self.now_s() - self.dialled_s >= REDIAL_PERIOD_S:
+            self.dialled_s = self.now_s()
+            self.tables.redial()
         self.tell_controller()
 
     def on_link_event(self, event) -> None:
@@ -337,8 +352,16 @@ class FrcBridgeNode(Node):
             level, message = LEVELS[event.level], event.message
         counts = {f'{name} (last s)': self.counts[name] - self.counts_said[name]
                   for name in self.counts}
+        ages_ms = sorted(self.reading_ages_ms)
+        if ages_ms and event is None:   # how old readings were when this process took them
+            counts['reading age p50 (ms, last s)'] = f'{ages_ms[len(ages_ms) // 2]:.2f}'
+            counts['reading age p99 (ms, last s)'] = \
+                f'{ages_ms[min(len(ages_ms) - 1, int(0.99 * len(ages_ms)))]:.2f}'
+            counts['reading age max (ms, last s)'] = f'{ages_ms[-1]:.2f}'
+            counts['readings older than 10 ms (last s)'] = sum(a > 10.0 for a in ages_ms)
         if event is None:
             self.counts_said = dict(self.counts)
+            self.reading_ages_ms = []
         self.refused_said_s = {}        # when bad input from each source was last said
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()
