@@ -211,3 +211,39 @@ def test_the_executable_serves_and_stops_on_ctrl_c():
             ntcore.NetworkTableInstance.destroy(client)
     assert process.returncode == 0, output
     assert f'serving NT4 on 127.0.0.1:{port}' in output
+
+
+def test_a_command_is_not_queued_behind_drawing():
+    """The bridge's tables with a backlog of drawing set just before a command: the command
+    reaches the robot first, flushed, and the drawing follows on its own connection."""
+    from arm_control.frc.mechanism import Mechanism2dPublisher
+    arm = config.load('sim')[0]
+    server = RobotTables(ntcore.NetworkTableInstance.create(), free_port())
+    tables = BridgeTables(ntcore.NetworkTableInstance.create(), 'test', 0, LOOPBACK,
+                          server.port)
+    arrivals = []
+    poller = ntcore.NetworkTableListenerPoller(server.instance)
+    try:
+        deadline = time.monotonic() + 5.0
+        while not (tables.connected() and tables.drawing.isConnected()) and \
+                time.monotonic() < deadline:
+            time.sleep(0.01)
+        drawing = Mechanism2dPublisher(tables.drawing, arm)
+        angle = ntcore.MultiSubscriber(server.instance, [nt.MECHANISM_TABLE + '/'])
+        poller.addListener(angle, ntcore.EventFlags.kValueRemote)
+        poller.addListener(server.command, ntcore.EventFlags.kValueRemote)
+        time.sleep(0.3)                         # the layout has gone
+        poller.readQueue()
+        for k in range(200):
+            drawing.show('arm', (0.001 * k, 0.5))
+        tables.send_command(encode_voltage(tables.server_now_us(), (1.0, 2.0)))
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline:
+            arrivals += [event.data.topic.getName() for event in poller.readQueue()]
+            time.sleep(0.001)
+    finally:
+        tables.close()
+        server.close()
+    assert nt.COMMAND.name in arrivals and len(arrivals) > 1, arrivals
+    assert arrivals[0] == nt.COMMAND.name, arrivals[:5]
+    assert tables.drawing is not tables.instance      # drawing never rides a command's flush
