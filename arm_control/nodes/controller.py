@@ -33,7 +33,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import uninstall_signal_handlers
 from rclpy.time import Time
 from sensor_msgs.msg import BatteryState, JointState
-from std_msgs.msg import Float64MultiArray, String
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 from std_srvs.srv import SetBool, Trigger
 
 from arm_control.config import ArmConfig, ControllerConfig
@@ -41,8 +41,10 @@ from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health
 from arm_control.control.latency import CommandDelay
+from arm_control.control.robot_command import profile_ahead, RobotClock
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
+from arm_control.model.profile import encode
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
                                       LATCHED, loop_statistics, PLANNER_AVAILABLE, run,
@@ -93,6 +95,7 @@ class ControllerNode(Node):
         self.loop_periods_s, self.loop_compute_s, self.last_tick_s = [], [], None
         self.reading_ages_s = []            # arrival minus stamp of each joint_states
         self.command_delay = CommandDelay(self.config.period_s)
+        self.robot_clock = RobotClock(self.config.period_s)    # from the readings' stamps
         sys.setswitchinterval(0.001)   # another thread waits 1 ms for Python, not 5
 
         self.voltage_pub = self.create_publisher(Float64MultiArray, 'voltage_command', COMMANDS)
@@ -139,9 +142,28 @@ class ControllerNode(Node):
         none: the sim applies a step's command from the step's start."""
         return 0.0 if self.loop.simulated() else self.command_delay.delay_s
 
+    def acts_s(self, sent_s: float) -> float:
+        """When a command sent at ``sent_s`` acts: on its arrival (``command_mode: volts``),
+        or a profile's first setpoint, at the robot's first instant after it (``RobotClock``)."""
+        arrives_s = sent_s + self.lag_s()
+        return self.robot_clock.acting_at(arrives_s) if self.config.command_mode == 'profile' \
+            else arrives_s
+
     def core_now_s(self) -> float:
         """The core's clock: the instant the command it computes now will act."""
-        return self.now_s() + self.lag_s()
+        return self.acts_s(self.now_s())
+
+    def command_message(self, voltage, acts_s: float) -> Float64MultiArray:
+        """The step's command: a profile from ``acts_s`` (docs/robot_loop.md), else, or when
+        the core is at 0 V, the voltage pair."""
+        if self.config.command_mode != 'profile' or self.core.unpowered:
+            return Float64MultiArray(data=[float(v) for v in voltage])
+        dims, offset, data = encode(profile_ahead(self.core, acts_s, self.robot_clock.period_s))
+        message = Float64MultiArray(data=data)
+        message.layout.data_offset = offset
+        message.layout.dim = [MultiArrayDimension(label=label, size=size, stride=stride)
+                              for label, size, stride in dims]
+        return message
 
     def command(self, call, *args):
         """Call the core under the lock, then say what it said. A call that cuts the power
@@ -286,8 +308,10 @@ class ControllerNode(Node):
 
     def tick(self) -> None:
         began, now = time.perf_counter(), self.now_s()
-        acts_s = now + self.lag_s()
         reading, self.reading = self.reading, None
+        if reading is not None:
+            self.robot_clock.observe(reading[0].sampled_s)
+        acts_s = self.acts_s(now)
         with self.lock:
             try:
                 voltage = self.core.step(acts_s, *(reading or (None, None)))
@@ -300,7 +324,7 @@ class ControllerNode(Node):
                     or self.core.state != self.last_state
                     or self.core.goals.queue.version != self.last_queue_version)
             if estimate is not None:     # before the first reading there is nothing to command
-                self.voltage_pub.publish(Float64MultiArray(data=[float(v) for v in voltage]))
+                self.voltage_pub.publish(self.command_message(voltage, acts_s))
         if estimate is not None:
             self.command_delay.sent(time.perf_counter() - began)
             stamp = Time(nanoseconds=round(acts_s * 1e9)).to_msg()     # what they are for
@@ -317,7 +341,7 @@ class ControllerNode(Node):
         """From the worker's result thread: the plan to the core, from when the next command
         acts (in simulated time the next step, if this one's went out), and the loop runs."""
         with self.lock:
-            self.core.on_timed_plan(self.loop.next_command_s() + self.lag_s(), timed)
+            self.core.on_timed_plan(self.acts_s(self.loop.next_command_s()), timed)
         self.loop.poke()
 
     # ------------------------------------------------------------------ outputs
