@@ -7,7 +7,6 @@ from pathlib import Path
 import re
 import time
 
-from hypothesis import given, settings, strategies as st
 import ntcore
 import numpy as np
 import pytest
@@ -175,57 +174,6 @@ def test_feedforward_takes_no_acceleration_across_a_gap(arm):
     feedforward(0.0, (0.5, 0.5), (0.0, 0.0))
     after_gap = feedforward(1.0, (0.5, 0.5), (2.0, 0.0))       # 1 s later: not a 2 rad/s² jump
     assert after_gap == pytest.approx(dynamics.voltage_for((0.5, 0.5), (2.0, 0.0), (0.0, 0.0)))
-
-
-# ---------------------------------------------------------------------- the robot's watchdog
-
-
-def test_a_command_drives_until_its_timeout_then_0v():
-    watchdog = rules.CommandWatchdog(0.1)
-    assert watchdog.offer('drive', sent_s=10.00, now_s=10.01) == ''
-    assert watchdog.segments(10.02, 10.04) == [(10.02, 10.04, 'drive')]
-    assert watchdog.segments(10.08, 10.14) == [(10.08, 10.1, 'drive'), (10.1, 10.14, None)]
-    assert watchdog.segments(10.14, 10.16) == [(10.14, 10.16, None)]
-
-
-def test_a_command_older_than_the_timeout_is_refused_not_applied_late():
-    watchdog = rules.CommandWatchdog(0.1)
-    assert 'stale: sent 0.500 s ago' in watchdog.offer('old', sent_s=9.5, now_s=10.0)
-    assert watchdog.segments(10.0, 10.02) == [(10.0, 10.02, None)]
-
-
-def test_a_command_older_than_the_one_held_is_refused():
-    watchdog = rules.CommandWatchdog(0.1)
-    watchdog.offer('new', sent_s=10.0, now_s=10.0)
-    assert 'not newer' in watchdog.offer('older', sent_s=9.99, now_s=10.0)
-    assert watchdog.command == 'new'
-
-
-def test_a_dropped_command_is_0v_at_once():
-    watchdog = rules.CommandWatchdog(0.1)
-    watchdog.offer('drive', sent_s=10.0, now_s=10.0)
-    watchdog.drop()
-    assert watchdog.segments(10.0, 10.02) == [(10.0, 10.02, None)]
-
-
-@settings(max_examples=200, deadline=None)
-@given(st.lists(st.tuples(st.floats(0.0, 0.2), st.floats(0.001, 0.3)), min_size=1,
-                max_size=30))
-def test_no_command_ever_drives_past_its_timeout(loops):
-    """Commands sent with random delays, loops run at random (late) times: every span a
-    command drives ends by its send time + timeout, and spans tile the time without gaps."""
-    timeout_s = 0.1
-    watchdog = rules.CommandWatchdog(timeout_s)
-    now_s = 0.0
-    for k, (delay_s, loop_s) in enumerate(loops):
-        start_s, now_s = now_s, now_s + loop_s
-        watchdog.offer(('command', k, now_s - delay_s), now_s - delay_s, now_s)
-        spans = watchdog.segments(start_s, now_s)
-        assert spans[0][0] == start_s and spans[-1][1] == now_s
-        assert all(a[1] == b[0] for a, b in zip(spans, spans[1:]))
-        for _, to_s, command in spans:
-            if command is not None:
-                assert to_s <= command[2] + timeout_s + 1e-12
 
 
 # ---------------------------------------------------------------------- the bridge's link

@@ -1,11 +1,12 @@
-"""The bridge end to end on one machine: frc_robot_sim (a real ntcore NT4 server) stands in
-for the roboRIO; frc_bridge, controller and planner run as installed processes on their own
-ROS domain.
+"""The bridge end to end on one machine: frc_robot_sim (a real ntcore NT4 server, its robot
+loop at a phase of 7 ms) stands in for the roboRIO; frc_bridge, controller and planner run
+as installed processes on their own ROS domain.
 
 Where the arm went is measured on the stand-in's truth (``/arm/sim/true_state``), read by
 an NT client of the test's own, straight from the robot: never through the bridge. A lost
 connection is each side going silent (SIGSTOP), as the other side sees a pulled cable: the
-robot must stop the motors on its own, the bridge must say so and disable the controller.
+robot must hold the arm where its last profile ends on its own, the bridge must say it lost
+the robot, and the controller must stop as its joint states do.
 """
 
 import math
@@ -285,26 +286,26 @@ def paused(process, seconds: float, rig) -> None:
         os.kill(process.pid, signal.SIGCONT)
 
 
-def test_the_robot_stops_within_0_1s_of_the_last_command_when_the_bridge_goes_silent(rig):
+def test_the_robot_holds_the_arm_where_its_profile_ends_when_the_bridge_goes_silent(rig):
+    """The controller sends profiles that end at rest with their holding volts: with the
+    bridge silent for half a second, the robot plays the last to its end and holds the arm
+    there (never a stale voltage, never a fall); then the controller carries on."""
     assert rig.spin_until(lambda: rig.state in ('waiting', 'holding'), 5.0)
     rig.probe.spin_for(0.3)
     rig.watch.poll()
+    assert rig.watch.samples['profiles'], 'the controller sends no profiles'
+    held_q = rig.watch.true_q()
     stopped_s = now_us() * 1e-6
     paused(rig.nodes['frc_bridge'].process, 0.5, rig)
     rig.watch.poll()
-    last_command_s = max(t for t, _ in rig.watch.samples['commands'] if t <= stopped_s + 0.05)
-    # Each sample is the voltage over the loop ending at its time: the last one that drove
-    # the motors ended within 0.1 s of the last command sent, and 0 V since.
-    after = [(t, v) for t, v in rig.watch.samples['applied'] if t > stopped_s]
-    driven = [t for t, v in after if v != [0.0, 0.0] and t < stopped_s + 0.45]
-    zero_from_s = max(driven, default=last_command_s)
-    assert zero_from_s - last_command_s <= 0.1 + 1e-3, \
-        f'0 V only {zero_from_s - last_command_s:.3f} s after the last command'
-    assert all(v == [0.0, 0.0] for t, v in after if zero_from_s < t < stopped_s + 0.45)
-    assert 'no fresh command for 0.1 s: 0 V' in rig.output('frc_robot_sim')
+    during = [(t, s) for t, s in rig.watch.samples['truth'] if stopped_s < t < stopped_s + 0.5]
+    assert len(during) > 15
+    assert max(np.max(np.abs(np.array(s[:2]) - held_q)) for _, s in during) < math.radians(1.0)
+    applied = [v for t, v in rig.watch.samples['applied'] if stopped_s < t < stopped_s + 0.5]
+    assert all(any(abs(x) > 0.3 for x in v) for v in applied)     # holding against gravity
     since = time.monotonic()
     assert rig.spin_until(lambda: rig.state in ('waiting', 'holding') and
-                          rig.held_at(rig.watch.true_q(), math.radians(3.0)), 10.0), \
+                          rig.held_at(rig.watch.true_q(), math.radians(1.0)), 10.0), \
         rig.said('', since, 'controller_events')
 
 

@@ -71,20 +71,39 @@ def test_a_command_drives_until_its_instant_plus_the_timeout_then_0v(arm):
     assert readings[-1][0].applied_voltage_v == (0.0, 0.0)
 
 
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.0, 0.2), st.floats(0.001, 0.3)), min_size=1,
+                max_size=20))
+def test_no_pair_ever_drives_past_its_timeout(arm, loops):
+    """Pairs sent with random delays, loops run at random (late) times: a pair is applied
+    only at loops before its time_us + timeout, and the arm never runs under it after."""
+    loop = robot(arm)
+    now_s = 1.0
+    expires_s = {}
+    for k, (delay_s, late_s) in enumerate(loops):
+        now_s += late_s
+        command = codec.VoltageCommand(round((now_s - delay_s) * 1e6), (0.1 * (k + 1), 0.0))
+        expires_s[command.voltage_v] = command.time_us * 1e-6 + TIMEOUT_S
+        reading, _ = loop.step(now_s, True, [command])
+        if reading.applied_voltage_v != (0.0, 0.0):
+            assert now_s < expires_s[reading.applied_voltage_v]
+            assert loop.voltage_until_s <= expires_s[reading.applied_voltage_v] + 1e-9
+
+
 def test_a_command_past_its_expiry_on_arrival_is_refused(arm):
     loop = robot(arm)
     stale = codec.VoltageCommand(round(0.5e6), (6.0, 6.0))
     readings = run(loop, [1.0, 1.02], [(0.99, stale)])
     assert all(r.applied_voltage_v == (0.0, 0.0) for r, _ in readings)
-    assert [why for _, _, why in loop.refused] == ['stale']
+    assert [command for _, command in loop.refused] == [stale]
 
 
-def test_an_older_command_never_replaces_a_newer_one(arm):
+def test_the_latest_to_arrive_is_in_charge(arm):
     loop = robot(arm)
-    newer = codec.VoltageCommand(round(1.000e6), (2.0, 2.0))
-    older = codec.VoltageCommand(round(0.990e6), (5.0, 5.0))
-    readings = run(loop, [1.01, 1.03], [(1.001, newer), (1.02, older)])
-    assert readings[-1][0].applied_voltage_v == (2.0, 2.0)
+    first = codec.VoltageCommand(round(1.000e6), (2.0, 2.0))
+    second = codec.VoltageCommand(round(1.005e6), (5.0, 5.0))
+    readings = run(loop, [1.01, 1.03], [(1.001, first), (1.02, second)])
+    assert [r.applied_voltage_v for r, _ in readings] == [(2.0, 2.0), (5.0, 5.0)]
 
 
 def test_disabled_is_0v_at_the_next_loop_and_says_so(arm):
@@ -162,8 +181,8 @@ def test_commands_round_trip_and_a_three_value_command_is_a_voltage():
 
 def test_a_profile_is_played_at_the_robot_s_instant_and_held_past_its_end(arm):
     """The loop plays a profile with its own gains at the loop's instant (the nearest
-    setpoint, extrapolated along its velocity); past its end, its last setpoint at rest;
-    past its last setpoint + the timeout, 0 V."""
+    setpoint, extrapolated along its velocity); past its end, its last setpoint held at
+    rest, however long no command comes."""
     loop = robot(arm)
     sent = profile(1_000_000, [((0.9, -0.6), (0.0, 0.0), (1.0, 1.0)),
                                ((0.9, -0.6), (1.0, 1.0), (2.0, 3.0))])
@@ -177,7 +196,11 @@ def test_a_profile_is_played_at_the_robot_s_instant_and_held_past_its_end(arm):
     held = [ff + kp * (target - q[j]) - kd * qd[j] for j, (ff, (kp, kd), target) in
             enumerate(zip((2.0, 3.0), GAINS, (0.9, -0.6)))]
     assert late.applied_voltage_v == pytest.approx(held)
-    assert loop.step(1.12, True)[0].applied_voltage_v == (0.0, 0.0)     # 1.02 + 0.1 s
+    much_later, _ = loop.step(1.5, True)
+    q, qd = much_later.position_rad, much_later.velocity_rad_s
+    assert much_later.applied_voltage_v == pytest.approx(np.clip(
+        [ff + kp * (target - q[j]) - kd * qd[j] for j, (ff, (kp, kd), target) in
+         enumerate(zip((2.0, 3.0), GAINS, (0.9, -0.6)))], -12.0, 12.0))
 
 
 def test_the_loop_s_instants_keep_their_phase():

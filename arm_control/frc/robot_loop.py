@@ -2,27 +2,28 @@
 
 At each loop instant t_k (NT server clock, seconds):
 
-1. the arm has run from t_{k-1} to t_k under the voltage set at t_{k-1} (0 V from its
-   command's expiry on, if that came first);
+1. the arm has run from t_{k-1} to t_k under the voltage set at t_{k-1} (0 V from a
+   pair's timeout on, if that came first);
 2. the sensors are read: one reading, stamped t_k;
-3. the commands that have *arrived* by t_k are taken, newest last (one not newer than the
-   command held, or already past its expiry, is refused);
-4. the voltage from t_k on: a voltage pair as it is; a profile played at t_k on the fresh
-   reading by ``model.profile.ProfilePlayer`` (its setpoint for t_k,
-   V = V_ff + kp·(θ_sp − θ) + kd·(θ̇_sp − θ̇)); 0 V while disabled or once the newest
-   command has expired: a pair at ``time_us + command_timeout_s``, a profile at its last
-   setpoint's instant + ``command_timeout_s`` (played to its end, its last setpoint held).
+3. the commands that have *arrived* by t_k are taken (``model.robot_commands``): the
+   latest is in charge. One already stale on arrival is refused: a pair past its
+   ``time_us + command_timeout_s``, a profile past its last setpoint + the timeout;
+4. the voltage from t_k on: a voltage pair as it is until ``time_us + command_timeout_s``,
+   then 0 V; a profile played at t_k on the fresh reading (``ProfilePlayer``:
+   V = V_ff + kp·(θ_sp − θ) + kd·(θ̇_sp − θ̇)), past its end its last setpoint held at rest
+   with its holding volts; 0 V while disabled.
 
-So a command acts from the first loop after it arrived, never before, and never past its
-expiry. No ntcore here: ``robot_sim`` feeds it what NT delivered.
+So a command acts from the first loop after it arrived, never before, and a pair never
+past its timeout, however late the loop runs. No ntcore here: ``robot_sim`` feeds it what
+NT delivered.
 """
 
 import math
 
-from arm_control.frc.codec import ProfileCommand, Reading, VoltageCommand
+from arm_control.frc.codec import ProfileCommand, Reading
 from arm_control.frc.conversions import clamp_voltage
 from arm_control.frc.rules import ZERO_V
-from arm_control.model.profile import ProfilePlayer
+from arm_control.model.robot_commands import RobotCommands
 
 
 class RobotLoop:
@@ -32,35 +33,29 @@ class RobotLoop:
         if not command_timeout_s > 0.0:
             raise ValueError(f'command timeout must be > 0 s, got {command_timeout_s}')
         self.plant = plant
-        self.player = ProfilePlayer(max_voltage)
         self.max_voltage = max_voltage
         self.timeout_s = command_timeout_s
-        self.command = None                     # the command held, or None
+        self.commands = RobotCommands(max_voltage, command_timeout_s)
         self.voltage = ZERO_V                   # set at the last loop ...
-        self.voltage_until_s = math.inf         # ... until its command's expiry
+        self.voltage_until_s = math.inf         # ... until a pair's timeout
         self.last_s = None
-        self.refused = []                       # (loop time, command, why) since last asked
+        self.refused = []                       # (loop time, command) refused as stale
 
-    def expires_s(self, command) -> float:
+    def stale(self, command, now_s: float) -> bool:
         last_us = command.end_us if isinstance(command, ProfileCommand) else command.time_us
-        return last_us * 1e-6 + self.timeout_s
+        return now_s >= last_us * 1e-6 + self.timeout_s
 
     def take(self, now_s: float, arrived) -> None:
-        """Step 3: hold the newest of ``arrived`` (commands, oldest first) if it is newer
-        than the one held and not expired."""
+        """Step 3: ``arrived`` (decoded commands, in arrival order) taken at ``now_s``. A
+        pair's timeout runs from its own instant, a profile from its start on."""
         for command in arrived:
-            if self.command is not None and command.time_us <= self.command.time_us:
-                self.refused.append((now_s, command, 'not newer'))
-            elif now_s >= self.expires_s(command):
-                self.refused.append((now_s, command, 'stale'))
+            if self.stale(command, now_s):
+                self.refused.append((now_s, command))
+            elif isinstance(command, ProfileCommand):
+                self.commands.arrive(now_s, command.profile)
             else:
-                if isinstance(command, ProfileCommand):
-                    if not isinstance(self.command, ProfileCommand):
-                        self.player.clear()
-                    self.player.offer(command.profile)
-                else:
-                    self.player.clear()
-                self.command = command
+                self.commands.arrive(min(now_s, command.time_us * 1e-6), command.voltage_v)
+        self.commands.take(now_s)
 
     def step(self, now_s: float, enabled: bool, arrived=()):
         """One loop at ``now_s``: returns (the reading, the plant's true state at now_s)."""
@@ -77,18 +72,13 @@ class RobotLoop:
         velocity = tuple(float(v) for v in sensed.velocity_rad_s)
         if enabled:
             self.take(now_s, arrived)
-        else:
-            self.command = None
-            self.player.clear()
-        command, voltage = self.command, None
-        if command is not None and now_s < self.expires_s(command):
-            voltage = command.voltage_v if isinstance(command, VoltageCommand) else \
-                self.player.volts(now_s, position, velocity)
-        if voltage is None:
-            self.voltage, self.voltage_until_s = ZERO_V, math.inf
-        else:
-            self.voltage = clamp_voltage(voltage, self.max_voltage)
-            self.voltage_until_s = self.expires_s(command)
+            self.voltage = clamp_voltage(self.commands.volts(now_s, position, velocity),
+                                         self.max_voltage)
+        else:                                   # disabled: 0 V, and every command dropped
+            self.commands = RobotCommands(self.max_voltage, self.timeout_s)
+            self.voltage = ZERO_V
+        self.voltage_until_s = math.inf if self.commands.playing else \
+            self.commands.pair_s + self.timeout_s
         if self.plant.resting and any(v != 0.0 for v in self.voltage):
             self.plant.release()
         self.plant.set_voltage(self.voltage)
@@ -99,6 +89,11 @@ class RobotLoop:
             bus_voltage_v=float(sensed.bus_voltage),
             supply_current_a=float(sensed.supply_current_a), applied_voltage_v=self.voltage)
         return reading, tuple(float(x) for x in sensed.true_state)
+
+    @property
+    def driving(self) -> bool:
+        """A command is in charge (a profile, or a pair not timed out)."""
+        return self.commands.playing or self.voltage_until_s > self.last_s
 
 
 def loop_instants(phase_s: float, period_s: float, after_s: float) -> float:

@@ -4,9 +4,9 @@ It serves NT4 on 127.0.0.1 only and runs a robot loop as the contract says a rob
 (``robot_loop.RobotLoop``): at instants phase + k·period of the NT server clock it reads the
 simulated arm's sensors (``ArmPlant``, noise and all), publishes them as one reading stamped
 with that instant, and applies the newest command that has arrived: a voltage pair, or a
-profile played on the fresh reading with the profile's own kp and kd. A command drives the
-motors until its own instant (a profile's: its last setpoint's) + ``command_timeout_s``,
-then 0 V. It honours enable and disable
+profile played on the fresh reading with the profile's own kp and kd. A voltage pair drives
+the motors until its own instant + ``command_timeout_s``, then 0 V; a profile is played to
+its end and then holds its last setpoint. It honours enable and disable
 (``/arm/sim/enable``, as the Driver Station would). As in ``sim``, the arm rests on its stow
 support until the first voltage that is not zero; the battery sags and the motor
 controllers limit the current, as ``sim``'s.
@@ -92,13 +92,12 @@ class RobotStandIn:
         now_s = time_us * 1e-6
         self.take_enable()
         reading, truth = self.loop.step(now_s, self.enabled, self.arrived(now_s))
-        for _, command, why in self.loop.refused:
-            if why == 'stale':
-                self.complain('stale', now_s, f'refused a command for '
-                              f'{command.time_us * 1e-6 - now_s:+.3f} s: past its expiry')
+        for _, command in self.loop.refused:
+            self.complain('stale', now_s, f'refused a command for '
+                          f'{command.time_us * 1e-6 - now_s:+.3f} s: past its expiry')
         self.loop.refused.clear()
-        driving = self.loop.command is not None and reading.applied_voltage_v != (0.0, 0.0)
-        if self.driving and self.loop.command is not None and not driving and self.enabled:
+        driving = self.loop.driving
+        if self.driving and not driving and self.enabled:
             self.complain('expired', now_s, f'no fresh command for '
                           f'{self.loop.timeout_s:g} s: 0 V')
         self.driving = driving

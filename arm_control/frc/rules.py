@@ -1,10 +1,7 @@
-"""What is fresh and what is allowed, on each side of the link.
-
-The robot side (``CommandWatchdog``): a command drives the motors until ``timeout_s`` after
-it was sent, then 0 V, like a motor controller's own CAN timeout; a command already older
-than that when it arrives is refused, never applied late. The bridge side (``RobotLink``):
-the controller's voltages go to the robot only while its readings are fresh and it is
-enabled, else 0 V; the controller is disabled and enabled with the robot.
+"""What is fresh and what is allowed, on the bridge's side of the link (``RobotLink``): the
+controller's commands go to the robot only while its readings are fresh and it is enabled,
+else 0 V; the controller is disabled and enabled with the robot. (The robot's side:
+``robot_loop``.)
 """
 
 from dataclasses import dataclass
@@ -12,50 +9,6 @@ from enum import Enum
 import math
 
 ZERO_V = (0.0, 0.0)
-
-
-class CommandWatchdog:
-    """The robot's rule for commands, on the NT clock (seconds).
-
-    ``offer`` takes a new command with the time it was sent; ``segments`` splits a span of
-    the robot loop into the part the command still drives and the part at 0 V. Nothing is
-    ever applied past ``sent + timeout_s``, however late the loop runs.
-    """
-
-    def __init__(self, timeout_s: float):
-        if not timeout_s > 0.0:
-            raise ValueError(f'command timeout must be > 0 s, got {timeout_s}')
-        self.timeout_s = timeout_s
-        self.command = None
-        self.sent_s = -math.inf
-
-    @property
-    def expires_s(self) -> float:
-        return self.sent_s + self.timeout_s
-
-    def offer(self, command, sent_s: float, now_s: float) -> str:
-        """Hold ``command`` from now on; return '' if taken, else why it was refused."""
-        if sent_s <= self.sent_s:
-            return f'not newer than the command held (sent {self.sent_s - sent_s:.3f} s earlier)'
-        age_s = now_s - sent_s
-        if age_s > self.timeout_s:
-            return f'stale: sent {age_s:.3f} s ago, more than {self.timeout_s:g} s'
-        self.command, self.sent_s = command, sent_s
-        return ''
-
-    def drop(self) -> None:
-        """Forget the command held (the robot was disabled): 0 V until a newer one."""
-        self.command = None
-
-    def segments(self, start_s: float, end_s: float) -> list[tuple[float, float, object]]:
-        """``(from_s, to_s, command)`` covering [start_s, end_s]: the command held until it
-        expires, then None (0 V)."""
-        expires_s = self.expires_s if self.command is not None else -math.inf
-        if expires_s >= end_s:
-            return [(start_s, end_s, self.command)]
-        if expires_s <= start_s:
-            return [(start_s, end_s, None)]
-        return [(start_s, expires_s, self.command), (expires_s, end_s, None)]
 
 
 class LinkState(str, Enum):

@@ -22,7 +22,7 @@ import edu.wpi.first.wpilibj.motorcontrol.PWMTalonSRX;
 public class Robot extends TimedRobot {
   static final double GEAR_RATIO = 159.3;           // motor turns per joint turn
   static final double ENCODER_CPR = 2048;           // encoder counts per motor turn
-  static final long COMMAND_TIMEOUT_US = 100_000;   // drives until its last instant + this
+  static final long COMMAND_TIMEOUT_US = 100_000;   // a pair drives until time_us + this
   static final int VOLTAGE_SIZE = 3;                // [time_us, V_s, V_e], or
   static final int PROFILE_HEAD = 6, PROFILE_POINT = 6;  // [time_us, step_s, kp_s, kd_s, kp_e,
   // kd_e, then (q_s, q_e, qd_s, qd_e, ff_s, ff_e) per setpoint]
@@ -35,8 +35,8 @@ public class Robot extends TimedRobot {
       nt.getDoubleArrayTopic("/arm/robot/reading").publish(fast);
   final DoubleArraySubscriber commandSub =
       nt.getDoubleArrayTopic("/arm/command/motors").subscribe(new double[] {}, fast);
-  double[] held = null;                             // the command in force
-  final java.util.ArrayList<double[]> pending = new java.util.ArrayList<>();  // not begun yet
+  double[] held = null;                             // the command in charge
+  final java.util.ArrayList<double[]> pending = new java.util.ArrayList<>();  // profiles, not begun
 
   final PWMTalonSRX[] shoulderMotors = {new PWMTalonSRX(0), new PWMTalonSRX(1)};
   final PWMTalonSRX elbowMotor = new PWMTalonSRX(2);
@@ -66,8 +66,9 @@ public class Robot extends TimedRobot {
     return c.length == VOLTAGE_SIZE ? Double.NEGATIVE_INFINITY : c[0] - 0.5e6 * c[1];
   }
 
-  /** A pair at its instant + the timeout; a profile at its last setpoint's + the timeout. */
-  static double expiresUs(double[] c) {
+  /** Refused on arrival from then on: a pair's instant, a profile's last setpoint's, + the
+   * timeout. A pair also stops driving then; a profile never does (held at its end). */
+  static double staleUs(double[] c) {
     double lastUs = c.length == VOLTAGE_SIZE ? c[0] : c[0] + 1e6 * c[1] * (points(c) - 1);
     return lastUs + COMMAND_TIMEOUT_US;
   }
@@ -105,29 +106,38 @@ public class Robot extends TimedRobot {
     double bus = RobotController.getBatteryVoltage();
     boolean enabled = DriverStation.isEnabled();
 
-    // 2. The commands that have arrived: kept if newer than the one in force and not past
-    //    expiry; the newest begun is in force. Disabled: none.
+    // 2. The commands that have arrived, in order, unless stale: a pair takes charge at once;
+    //    a profile from half a step before its start. Disabled: none.
     for (TimestampedDoubleArray value : commandSub.readQueue()) {
       double[] c = value.value;
-      if (isCommand(c) && nowUs < expiresUs(c) && (held == null || c[0] > held[0])) {
+      if (!isCommand(c) || nowUs >= staleUs(c)) {
+        continue;
+      }
+      if (c.length == VOLTAGE_SIZE) {
+        held = c;
+        pending.clear();
+      } else {
         pending.add(c);
       }
     }
-    for (double[] c : pending) {
-      if (nowUs >= beginsUs(c) && (held == null || c[0] > held[0])) {
-        held = c;
+    int begun = -1;
+    for (int i = 0; i < pending.size(); i++) {
+      if (nowUs >= beginsUs(pending.get(i))) {
+        begun = i;
       }
     }
-    final double[] inForce = held;
-    pending.removeIf(c -> inForce != null && c[0] <= inForce[0]);
+    if (begun >= 0) {
+      held = pending.get(begun);
+      pending.subList(0, begun + 1).clear();
+    }
     if (!enabled) {
       held = null;
       pending.clear();
     }
 
-    // 3. The voltage from now on: 0 V once the command in force is past its expiry.
+    // 3. The voltage from now on: a pair until its timeout, then 0 V; a profile played.
     double[] v = {0.0, 0.0};
-    if (held != null && nowUs < expiresUs(held)) {
+    if (held != null && (held.length != VOLTAGE_SIZE || nowUs < staleUs(held))) {
       v = voltageFor(held, nowUs, q, qd);
     }
     for (int j = 0; j < 2; j++) {

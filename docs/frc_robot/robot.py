@@ -11,7 +11,7 @@ import wpilib
 
 GEAR_RATIO = 159.3                   # motor turns per joint turn
 ENCODER_CPR = 2048                   # encoder counts per motor turn
-COMMAND_TIMEOUT_US = 100_000         # a command drives until its last instant + this, then 0 V
+COMMAND_TIMEOUT_US = 100_000         # a pair drives until its time_us + this, then 0 V
 READING_SIZE = 14                    # the reading layout: see docs/frc_bridge.md
 VOLTAGE_SIZE = 3                     # a command: [time_us, V_s, V_e] ...
 PROFILE_HEAD, PROFILE_POINT = 6, 6   # ... or [time_us, step_s, kp_s, kd_s, kp_e, kd_e,
@@ -32,8 +32,9 @@ def begins_us(c):
     return -math.inf if len(c) == VOLTAGE_SIZE else c[0] - 0.5e6 * c[1]
 
 
-def expires_us(c):
-    """A pair at its instant + the timeout; a profile at its last setpoint's + the timeout."""
+def stale_us(c):
+    """Refused on arrival from then on: a pair's instant, a profile's last setpoint's,
+    + the timeout. A pair also stops driving then; a profile never does (held at its end)."""
     last_us = c[0] if len(c) == VOLTAGE_SIZE else c[0] + 1e6 * c[1] * (points(c) - 1)
     return last_us + COMMAND_TIMEOUT_US
 
@@ -62,8 +63,8 @@ class Robot(wpilib.TimedRobot):
         self.reading_pub = nt.getDoubleArrayTopic('/arm/robot/reading').publish(fast)
         self.command_sub = nt.getDoubleArrayTopic('/arm/command/motors').subscribe([], fast)
         self.state_sub = nt.getStringTopic('/arm/coprocessor/state').subscribe('')
-        self.held = None                     # the command in force
-        self.pending = []                    # arrived, newer, not begun yet
+        self.held = None                     # the command in charge
+        self.pending = []                    # profiles arrived, not begun yet
 
         self.shoulder_motors = [wpilib.PWMTalonSRX(0), wpilib.PWMTalonSRX(1)]
         self.elbow_motor = wpilib.PWMTalonSRX(2)
@@ -87,23 +88,26 @@ class Robot(wpilib.TimedRobot):
         bus = wpilib.RobotController.getBatteryVoltage()
         enabled = wpilib.DriverStation.isEnabled()
 
-        # 2. The commands that have arrived: kept if newer than the one in force and not
-        #    past expiry; the newest begun is in force. Disabled: none.
+        # 2. The commands that have arrived, in order, unless stale: a pair takes charge at
+        #    once; a profile from half a step before its start. Disabled: none.
         for value in self.command_sub.readQueue():
             c = list(value.value)
-            if is_command(c) and now_us < expires_us(c) and \
-                    (self.held is None or c[0] > self.held[0]):
+            if not is_command(c) or now_us >= stale_us(c):
+                continue
+            if len(c) == VOLTAGE_SIZE:
+                self.held, self.pending = c, []
+            else:
                 self.pending.append(c)
-        begun = [c for c in self.pending if now_us >= begins_us(c)]
+        begun = [i for i, c in enumerate(self.pending) if now_us >= begins_us(c)]
         if begun:
-            self.held = max(begun, key=lambda c: c[0])
-            self.pending = [c for c in self.pending if c[0] > self.held[0]]
+            self.held, self.pending = self.pending[begun[-1]], self.pending[begun[-1] + 1:]
         if not enabled:
             self.held, self.pending = None, []
 
-        # 3. The voltage from now on: 0 V once the command in force is past its expiry.
+        # 3. The voltage from now on: a pair until its timeout, then 0 V; a profile played.
         voltage = [0.0, 0.0]
-        if self.held is not None and now_us < expires_us(self.held):
+        if self.held is not None and (len(self.held) != VOLTAGE_SIZE or
+                                      now_us < stale_us(self.held)):
             voltage = voltage_for(self.held, now_us, position, velocity)
         battery = max(bus, 0.0)
         voltage = [min(max(v, -battery), battery) for v in voltage]
