@@ -72,18 +72,15 @@ class Robot:
         self.listener = tables.instance.addListener(
             tables.command, ntcore.EventFlags.kValueRemote,
             lambda event: self.arrivals.append((now_us(), event.data.value.time())))
-        # As frc_robot_sim runs: its loop and ntcore's threads at real-time priority. This
-        # (main) thread, and the ROS probe it starts later, a little lower but real-time
-        # too, as the controller's executor: at normal priority, preempted while holding
-        # Python's lock, it would stall the robot's loop in this process.
-        problem = raise_process(load_robot_sim().realtime_priority)
-        if problem:
-            print(problem)
+        # As frc_robot_sim runs: its loop and ntcore's threads at real-time priority; this
+        # (main) thread back to normal, so that what it starts is not real-time.
+        self.problem = raise_process(load_robot_sim().realtime_priority)
+        if self.problem:
+            print(self.problem)
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self.stand_in.run, args=(self.stop,))
         self.thread.start()
-        if not problem:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(PROBE_PRIORITY))
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
     def observe(self, reading, truth) -> None:
         self.published[reading.time_us] = reading
@@ -290,6 +287,13 @@ HEADER = ('| load | phase ms | goals reached & held | slowest move s | hold: fas
           '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
 
 
+def set_priority(priority: int) -> None:
+    """This thread at SCHED_FIFO ``priority``, or normal scheduling for 0 (what it starts
+    inherits it)."""
+    os.sched_setscheduler(0, os.SCHED_FIFO if priority else os.SCHED_OTHER,
+                          os.sched_param(priority))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--phases-ms', type=float, nargs='+', default=[0.0, 5.0, 10.0, 15.0])
@@ -305,12 +309,23 @@ def main() -> None:
     with ros_domain() as domain, tempfile.TemporaryDirectory() as log_dir:
         robot = Robot(port)
         copro = Coprocessor(domain, port, Path(log_dir))
+        # The probe's spinning (this thread) a little below the robot's loop but real-time,
+        # as the controller's executor: at normal priority, preempted while holding Python's
+        # lock, it would stall the robot's loop in this process. Its DDS threads, the nodes'
+        # processes and the busy loops are started at normal priority.
+        probe_rt = not robot.problem
+        set_priority(PROBE_PRIORITY if probe_rt else 0)
         try:
             if not copro.ready():
                 raise SystemExit('the controller never became ready:\n' +
                                  copro.nodes[2].output()[-3000:])
             for load in args.loads:
-                loops = busy.start(2, 3600.0) if load == 'busy' else []
+                set_priority(0)                 # the busy loops at normal priority
+                loops = busy.start(2, 900.0) if load == 'busy' else []
+                set_priority(PROBE_PRIORITY if probe_rt else 0)
+                if any(os.sched_getscheduler(p.pid) != os.SCHED_OTHER for p in loops):
+                    busy.stop(loops)
+                    raise SystemExit('the busy loops are not at normal priority')
                 try:
                     for phase_ms in args.phases_ms:
                         rows.append(run_phase(copro, robot, phase_ms, presets, load))
