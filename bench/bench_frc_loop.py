@@ -16,7 +16,11 @@ runs, as it drifts over a match. For each phase:
 - disabled: the robot disabled -> its first reading at 0 V and disabled, and ``arm_state``
   ``disabled`` heard on ROS;
 - drop: the robot's NT server stopped -> the bridge says it lost the robot; served again
-  -> the bridge says it is back. A "lost" outside these drops is false.
+  -> the bridge says it is back. A "lost" outside these drops (and not within 0.3 s after
+  the robot itself stalled for over 0.1 s) is false.
+
+The reference row applies each command the moment it reaches the robot (as the default
+``sim`` does), the loop still reading and publishing at its instants.
 
     python bench/bench_frc_loop.py                      # idle and busy, 4 phases
     python bench/bench_frc_loop.py --loads idle --phases-ms 0 10 --write-docs
@@ -146,8 +150,8 @@ def goal(copro, robot, name, x, y) -> dict:
     message.header.frame_id = 'arm_base'
     message.point.x, message.point.y = float(x), float(y)
     copro.goal_pub.publish(message)
-    reached = copro.probe.spin_until(
-        lambda: copro.said('controller_events', 'reached', since), REACH_TIMEOUT_S)
+    reached = bool(copro.probe.spin_until(
+        lambda: copro.said('controller_events', 'reached', since), REACH_TIMEOUT_S))
     move_s = (copro.said('controller_events', 'reached', since) or [np.nan])[0] - since
     copro.probe.spin_for(HOLD_S + 0.1)
     held = np.array([s for t, s in robot.truth if t > time.time() - HOLD_S])
@@ -249,8 +253,10 @@ def percentiles(values_ms) -> str:
     return f'{np.median(values_ms):.1f} / {np.percentile(values_ms, 99):.1f}'
 
 
-def run_phase(copro, robot, phase_ms, presets, load) -> str:
+def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
+    """One row: at ``phase_ms``, or (``reference``) with commands applied on arrival."""
     robot.stand_in.phase_s = phase_ms * 1e-3
+    robot.stand_in.apply_on_arrival(reference)
     copro.probe.spin_for(1.0)
     since = time.time()
     arrivals_from = len(robot.arrivals)
@@ -270,7 +276,9 @@ def run_phase(copro, robot, phase_ms, presets, load) -> str:
         print(f'false lost at {t - since:.2f} s: {said}', file=sys.stderr)
     false_lost = len(false_lost)
     held = sum(m['held'] for m in moves)
-    return (f'| {load} | {phase_ms:g} | {held}/{len(moves)} | '
+    robot.stand_in.apply_on_arrival(False)
+    phase = 'on arrival (reference)' if reference else f'{phase_ms:g}'
+    return (f'| {load} | {phase} | {held}/{len(moves)} | '
             f"{max(m['move_s'] for m in moves):.2f} | {max(m['speed'] for m in moves):.3f} | "
             f"{np.degrees(max(m['swing'] for m in moves)):.2f} | {mixed}/{checked} | "
             f'{stamp_error_ms:.2f} | {bridge_p50:.1f} / {bridge_over:.1f} | '
@@ -299,6 +307,8 @@ def main() -> None:
     parser.add_argument('--phases-ms', type=float, nargs='+', default=[0.0, 5.0, 10.0, 15.0])
     parser.add_argument('--loads', nargs='+', default=['idle', 'busy'],
                         choices=['idle', 'busy'])
+    parser.add_argument('--no-reference', dest='reference', action='store_false',
+                        help='leave out the row with commands applied on arrival')
     parser.add_argument('--write-docs', action='store_true')
     args = parser.parse_args()
     import busy
@@ -327,8 +337,10 @@ def main() -> None:
                     busy.stop(loops)
                     raise SystemExit('the busy loops are not at normal priority')
                 try:
-                    for phase_ms in args.phases_ms:
-                        rows.append(run_phase(copro, robot, phase_ms, presets, load))
+                    runs = [(0.0, True)] * args.reference + \
+                        [(phase_ms, False) for phase_ms in args.phases_ms]
+                    for phase_ms, reference in runs:
+                        rows.append(run_phase(copro, robot, phase_ms, presets, load, reference))
                         print(rows[-1], flush=True)
                 finally:
                     busy.stop(loops)

@@ -257,3 +257,17 @@ def test_a_dropped_connection_is_lost_at_once():
     assert lost.state == rules.LinkState.LOST and 'NT disconnected' in lost.message
     back = link.on_reading(1.0, robot_enabled=True)
     assert back.state == rules.LinkState.ENABLED and back.message.startswith('robot back')
+
+
+def test_the_on_arrival_reference_acts_at_arrival_not_at_the_next_loop(arm):
+    """The bench's reference row: applied on arrival, the command moves the arm before the
+    next loop instant, where a robot's loop would not yet."""
+    on_arrival, at_loop = robot(arm), robot(arm)
+    command = codec.VoltageCommand(round(1.004e6), (8.0, -6.0))
+    for loop in (on_arrival, at_loop):
+        loop.step(1.0, True)
+    on_arrival.apply_on_arrival(1.005, True, [command])
+    _, moved = on_arrival.step(1.02, True)
+    _, waited = at_loop.step(1.02, True, [command])
+    assert moved != waited
+    assert on_arrival.voltage == at_loop.voltage == (8.0, -6.0)

@@ -38,7 +38,8 @@ class RobotLoop:
         self.commands = RobotCommands(max_voltage, command_timeout_s)
         self.voltage = ZERO_V                   # set at the last loop ...
         self.voltage_until_s = math.inf         # ... until a pair's timeout
-        self.last_s = None
+        self.last_s = None                      # the last loop (or arrival) instant
+        self.plant_s = None                     # the instant the plant has reached
         self.refused = []                       # (loop time, command) refused as stale
 
     def stale(self, command, now_s: float) -> bool:
@@ -57,17 +58,52 @@ class RobotLoop:
                 self.commands.arrive(min(now_s, command.time_us * 1e-6), command.voltage_v)
         self.commands.take(now_s)
 
+    def run_to(self, now_s: float) -> None:
+        """Step 1: the arm run to ``now_s`` under the voltage set last (0 V past a pair's
+        timeout). The plant steps whole substeps: its own time is kept, so that the
+        rounding never adds up."""
+        if self.last_s is None:
+            self.last_s = self.plant_s = now_s
+            return
+        if now_s <= self.last_s:
+            return
+        until_s = min(now_s, max(self.voltage_until_s, self.plant_s))
+        self.advance_to(until_s)
+        if until_s < now_s:
+            self.plant.set_voltage(ZERO_V)
+            self.advance_to(now_s)
+        self.last_s = now_s
+
+    def advance_to(self, t_s: float) -> None:
+        step_s = self.plant.physics_step_s
+        steps = round((t_s - self.plant_s) / step_s)
+        if steps > 0:
+            self.plant.advance(steps * step_s)
+            self.plant_s += steps * step_s
+
     def step(self, now_s: float, enabled: bool, arrived=()):
         """One loop at ``now_s``: returns (the reading, the plant's true state at now_s)."""
-        if self.last_s is not None and now_s > self.last_s:
-            driven_s = min(now_s, max(self.voltage_until_s, self.last_s)) - self.last_s
-            if driven_s > 0.0:
-                self.plant.advance(driven_s)
-            if driven_s < now_s - self.last_s:
-                self.plant.set_voltage(ZERO_V)
-                self.plant.advance(now_s - self.last_s - driven_s)
-        self.last_s = now_s
+        self.run_to(now_s)
         sensed = self.plant.read()
+        self.apply(now_s, enabled, arrived, sensed)
+        position = tuple(float(q) for q in sensed.potentiometer_rad)
+        velocity = tuple(float(v) for v in sensed.velocity_rad_s)
+        reading = Reading(
+            time_us=round(now_s * 1e6), enabled=enabled, position_rad=position,
+            velocity_rad_s=velocity, encoder_rad=tuple(float(q) for q in sensed.encoder_rad),
+            motor_current_a=tuple(float(i) for i in sensed.motor_current_a),
+            bus_voltage_v=float(sensed.bus_voltage),
+            supply_current_a=float(sensed.supply_current_a), applied_voltage_v=self.voltage)
+        return reading, tuple(float(x) for x in sensed.true_state)
+
+    def apply_on_arrival(self, now_s: float, enabled: bool, arrived) -> None:
+        """The reference, not a robot: ``arrived`` applied the moment they arrive (as the
+        default ``sim`` does), on the sensors of that moment; no reading is published."""
+        self.run_to(now_s)
+        self.apply(now_s, enabled, arrived, self.plant.read())
+
+    def apply(self, now_s: float, enabled: bool, arrived, sensed) -> None:
+        """Steps 3 and 4 with the sensors ``sensed``: the motors set from ``now_s`` on."""
         position = tuple(float(q) for q in sensed.potentiometer_rad)
         velocity = tuple(float(v) for v in sensed.velocity_rad_s)
         if enabled:
@@ -82,13 +118,6 @@ class RobotLoop:
         if self.plant.resting and any(v != 0.0 for v in self.voltage):
             self.plant.release()
         self.plant.set_voltage(self.voltage)
-        reading = Reading(
-            time_us=round(now_s * 1e6), enabled=enabled, position_rad=position,
-            velocity_rad_s=velocity, encoder_rad=tuple(float(q) for q in sensed.encoder_rad),
-            motor_current_a=tuple(float(i) for i in sensed.motor_current_a),
-            bus_voltage_v=float(sensed.bus_voltage),
-            supply_current_a=float(sensed.supply_current_a), applied_voltage_v=self.voltage)
-        return reading, tuple(float(x) for x in sensed.true_state)
 
     @property
     def driving(self) -> bool:

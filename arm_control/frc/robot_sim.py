@@ -59,6 +59,8 @@ class RobotStandIn:
         self.complained_s = {}
         self.phase_s = robot.loop_phase_s   # may change while it runs, as a match drifts
         self.observer = None            # observer(reading, true_state) after each loop
+        self.lock = threading.Lock()    # the loop, and commands applied on arrival
+        self.on_arrival = None          # the listener applying them, for a reference run
 
     @property
     def voltage(self) -> tuple[float, float]:
@@ -87,11 +89,39 @@ class RobotStandIn:
                 self.complain('command', now_s, f'refused: {error}')
         return commands
 
+    def apply_on_arrival(self, on: bool) -> None:
+        """A reference, not a robot: commands applied the moment they arrive, as ``sim``
+        does by default; the loop still reads and publishes at its instants."""
+        instance = self.tables.instance
+        if on and self.on_arrival is None:
+            self.on_arrival = instance.addListener(
+                self.tables.command, ntcore.EventFlags.kValueRemote, self._arrived)
+        elif not on and self.on_arrival is not None:
+            instance.removeListener(self.on_arrival)
+            self.on_arrival = None
+
+    def _arrived(self, event) -> None:
+        """ntcore's listener thread: a command arrived; applied now (reference runs only)."""
+        now_s = now_us() * 1e-6
+        with self.lock:
+            try:
+                command = decode_command(event.data.value.getDoubleArray())
+            except ValueError:
+                return                          # the loop says so when it drains its queue
+            self.loop.apply_on_arrival(now_s, self.enabled, [command])
+
     def tick(self, time_us: int) -> None:
         """One robot loop at ``time_us`` on the NT server clock."""
+        with self.lock:
+            self._tick(time_us)
+
+    def _tick(self, time_us: int) -> None:
         now_s = time_us * 1e-6
         self.take_enable()
-        reading, truth = self.loop.step(now_s, self.enabled, self.arrived(now_s))
+        arrived = self.arrived(now_s)
+        if self.on_arrival is not None:
+            arrived = []                        # taken on arrival already
+        reading, truth = self.loop.step(now_s, self.enabled, arrived)
         for _, command in self.loop.refused:
             self.complain('stale', now_s, f'refused a command for '
                           f'{command.time_us * 1e-6 - now_s:+.3f} s: past its expiry')
