@@ -74,6 +74,25 @@ class RobotClock:
         return self.last_s + periods * self.period_s
 
 
+class Commander:
+    """What the controller sends and for when (``command_mode``): a profile for the robot's
+    instant after the command arrives, or plain volts for its arrival; at 0 V, 0 V."""
+
+    def __init__(self, config):
+        self.clock = RobotClock(config.period_s)
+        self.profiles = config.command_mode == 'profile'
+
+    def acts_s(self, arrives_s: float) -> float:
+        """When a command that arrives at ``arrives_s`` acts, as the core computes it."""
+        return self.clock.acting_at(arrives_s) if self.profiles else arrives_s
+
+    def command(self, core, voltage, acts_s: float):
+        """The core's last step as a Profile from ``acts_s``, or its voltage pair."""
+        if self.profiles and not core.unpowered:
+            return profile_ahead(core, acts_s, self.clock.period_s)
+        return tuple(float(v) for v in voltage)
+
+
 def profile_ahead(core, start_s: float, step_s: float) -> Profile:
     """The profile from the core's last step, taken for the robot's instant ``start_s``,
     its setpoints ``step_s`` apart (the module's rule)."""
