@@ -2,8 +2,9 @@
 
 The robot reads its sensors and applies the latest command it has at its loop's instants,
 ``phase_s + k·period`` (``robot_loop``), or applies each command the instant it arrives and
-reads at those instants (``on_arrival``, the sim's other mode). The controller ticks at
-``j·period`` and its command arrives ``command_lag_s`` later; a reading reaches it
+reads at those instants (``on_arrival``, the sim's other mode). The controller ticks every
+period (sending profiles, as the node does: ``Commander.tick_due``) and its command
+arrives ``command_lag_s`` later; a reading reaches it
 ``reading_transit_s`` after it was taken. The controller sends plain volts computed for its
 tick plus the lag (``volts``, the controller's ``command_mode: volts``), plain volts
 computed for the robot's next instant learned from the stamps (``volts_at_instant``), or a
@@ -57,6 +58,7 @@ class RobotLoop:
         self.plain = (0.0, 0.0)      # the last plain command applied
         self.playing = False         # a profile is in charge
         self.history = []            # (t s, true state)
+        self.next_tick_ms = 0
         self.lowest_m = math.inf
 
     @property
@@ -94,8 +96,10 @@ class RobotLoop:
                                            reading.velocity_rad_s)
                 volts = self.plain if played is None else played
             self.plant.set_voltage(volts)
-        if now_ms % self.period_ms == 0:
+        if now_ms >= self.next_tick_ms:
             self._tick(now_ms)
+            due_s = self.commander.tick_due((now_ms + self.period_ms) / 1000.0)
+            self.next_tick_ms = round(1000.0 * due_s)
         self.plant.advance(0.001 * STEP_MS)
         self.now_ms += STEP_MS
         self.history.append((self.now_s, np.array(self.plant.state)))

@@ -124,7 +124,8 @@ class ControllerNode(Node):
         self.create_timer(1.0, self.publish_diagnostics)
         priority = self.config.realtime_priority
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
-                                self.get_logger().warning, self.has_reading, self.plans.busy)
+                                self.get_logger().warning, self.has_reading, self.plans.busy,
+                                self.commander.tick_due)
         self.publish_outputs()
         self.loop.start()
         if priority:         # this thread spins the executor (where refused, the loop said so)
