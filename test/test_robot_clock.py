@@ -8,15 +8,32 @@ import math
 import numpy as np
 import pytest
 
+from arm_control.config import ControllerConfig, SimConfig
 from arm_control.control.robot_command import (AHEAD, ARRIVAL_MARGIN_S, profile_ahead,
                                                RobotClock)
 from arm_control.control.robot_loop import RobotLoop
 from arm_control.model.profile import Profile, Setpoint
 from arm_control.model.robot_commands import RobotCommands, ZERO_V
+from arm_control.parameters import ParameterError, read_parameter_files
 
 PERIOD_S = 0.02
 HOLD = Profile(0.0, PERIOD_S, ((20.0, 1.0), (20.0, 1.0)),
                (Setpoint((1.0, -1.0), (0.0, 0.0), (3.0, 2.0)),))
+
+
+@pytest.mark.parametrize('node, settings, name, value', [
+    (SimConfig, 'sim', 'command_timing', 'whenever'),
+    (SimConfig, 'sim', 'robot_loop_phase_s', 0.03),
+    (SimConfig, 'sim', 'robot_loop_phase_s', -0.001),
+    (ControllerConfig, 'controller', 'command_mode', 'torque'),
+    (ControllerConfig, 'controller', 'robot_feedback_share', 1.5),
+])
+def test_bad_robot_loop_settings_are_refused_naming_them(node, settings, name, value):
+    params = read_parameter_files([], settings)
+    node.from_parameters(params)
+    params[name] = value
+    with pytest.raises(ParameterError, match=f"'{name}'"):
+        node.from_parameters(params)
 
 
 @pytest.mark.parametrize('phase_s', [0.0, 0.005, 0.013, 0.019])

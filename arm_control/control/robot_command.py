@@ -4,7 +4,8 @@ A robot reads its sensors and applies the latest command it has at its own loop'
 so a command acts at the first instant after it arrives: anywhere from 0 to a whole period
 after it was sent. Each reading is stamped at one of those instants, so the readings' stamps
 give the loop (``RobotClock``): the controller computes each command for the robot's next
-instant after it can arrive (with ``ARRIVAL_MARGIN_S`` to spare), and sends a profile
+instant after it can arrive (with ``ARRIVAL_MARGIN_S`` to spare), ticks just after the
+robot's instants (``TICK_AFTER_INSTANT_S``), and sends a profile
 (``model/profile.py``) that the robot plays at its loop:
 
 - setpoint 0, at that instant: the reference the controller's step tracks (its
@@ -34,6 +35,10 @@ AHEAD = 3                     # setpoints along the motion before the stop
 # to arrive: its compute and its way there vary, and a profile that comes after the instant
 # it was for is played a period late (its first setpoint missed), one that comes early waits.
 ARRIVAL_MARGIN_S = 0.003
+# Sending profiles, the controller ticks this long after each of the robot's instants: the
+# instant's reading has come, and the command reaches the robot well before the next one,
+# so every command acts one period after the reading it answers, whatever the phase.
+TICK_AFTER_INSTANT_S = 0.003
 CLOCK_WINDOW = 25             # readings' gaps the robot's period is the median of
 
 
@@ -72,6 +77,37 @@ class RobotClock:
             return t_s
         periods = max(math.ceil((t_s - self.last_s) / self.period_s - 1e-6), 1)
         return self.last_s + periods * self.period_s
+
+
+class Commander:
+    """What the controller sends and for when (``command_mode``): a profile for the robot's
+    instant after the command arrives, or plain volts for its arrival; at 0 V, 0 V."""
+
+    def __init__(self, config):
+        self.period_s = config.period_s
+        self.clock = RobotClock(config.period_s)
+        self.profiles = config.command_mode == 'profile'
+
+    def tick_due(self, due_s: float) -> float:
+        """The controller's next tick, due at ``due_s``, moved to the nearest time
+        ``TICK_AFTER_INSTANT_S`` after a robot instant -- when sending profiles to a robot
+        whose loop runs at the controller's rate (within 1 %); else ``due_s``."""
+        clock = self.clock
+        if not self.profiles or clock.last_s is None or \
+                abs(clock.period_s - self.period_s) > 0.01 * self.period_s:
+            return due_s
+        periods = round((due_s - TICK_AFTER_INSTANT_S - clock.last_s) / clock.period_s)
+        return clock.last_s + periods * clock.period_s + TICK_AFTER_INSTANT_S
+
+    def acts_s(self, arrives_s: float) -> float:
+        """When a command that arrives at ``arrives_s`` acts, as the core computes it."""
+        return self.clock.acting_at(arrives_s) if self.profiles else arrives_s
+
+    def command(self, core, voltage, acts_s: float):
+        """The core's last step as a Profile from ``acts_s``, or its voltage pair."""
+        if self.profiles and not core.unpowered:
+            return profile_ahead(core, acts_s, self.clock.period_s)
+        return tuple(float(v) for v in voltage)
 
 
 def profile_ahead(core, start_s: float, step_s: float) -> Profile:

@@ -2,8 +2,9 @@
 
 The robot reads its sensors and applies the latest command it has at its loop's instants,
 ``phase_s + k·period`` (``robot_loop``), or applies each command the instant it arrives and
-reads at those instants (``on_arrival``, the sim's other mode). The controller ticks at
-``j·period`` and its command arrives ``command_lag_s`` later; a reading reaches it
+reads at those instants (``on_arrival``, the sim's other mode). The controller ticks every
+period (sending profiles, as the node does: ``Commander.tick_due``) and its command
+arrives ``command_lag_s`` later; a reading reaches it
 ``reading_transit_s`` after it was taken. The controller sends plain volts computed for its
 tick plus the lag (``volts``, the controller's ``command_mode: volts``), plain volts
 computed for the robot's next instant learned from the stamps (``volts_at_instant``), or a
@@ -12,6 +13,7 @@ much earlier or later than the controller expects (seeded). Physics on 1 ms step
 deterministic.
 """
 
+from dataclasses import replace
 import math
 from typing import Optional
 
@@ -19,7 +21,7 @@ import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.controller import ArmController
-from arm_control.control.robot_command import profile_ahead, RobotClock
+from arm_control.control.robot_command import Commander
 from arm_control.model.plant import ArmPlant
 from arm_control.model.profile import Profile, ProfilePlayer
 
@@ -46,7 +48,9 @@ class RobotLoop:
         self.transit_ms = round(1000.0 * reading_transit_s)
         self.jitter_ms = int(lag_jitter_ms)
         self.rng = np.random.default_rng(seed)
-        self.clock = RobotClock(controller_config.period_s)
+        self.commander = Commander(replace(controller_config, command_mode=(
+            'volts' if mode == 'volts' else 'profile')))
+        self.clock = self.commander.clock
         self.player = ProfilePlayer(arm.battery.nominal_voltage)
         self.now_ms = 0
         self.readings = []           # (arrives ms, stamp s, reading)
@@ -54,8 +58,8 @@ class RobotLoop:
         self.plain = (0.0, 0.0)      # the last plain command applied
         self.playing = False         # a profile is in charge
         self.history = []            # (t s, true state)
+        self.next_tick_ms = 0
         self.lowest_m = math.inf
-        self.sent_profiles = 0
 
     @property
     def now_s(self) -> float:
@@ -92,8 +96,10 @@ class RobotLoop:
                                            reading.velocity_rad_s)
                 volts = self.plain if played is None else played
             self.plant.set_voltage(volts)
-        if now_ms % self.period_ms == 0:
+        if now_ms >= self.next_tick_ms:
             self._tick(now_ms)
+            due_s = self.commander.tick_due((now_ms + self.period_ms) / 1000.0)
+            self.next_tick_ms = round(1000.0 * due_s)
         self.plant.advance(0.001 * STEP_MS)
         self.now_ms += STEP_MS
         self.history.append((self.now_s, np.array(self.plant.state)))
@@ -112,12 +118,11 @@ class RobotLoop:
         if stamp_s is not None:
             self.clock.observe(stamp_s)
         arrives_s = (now_ms + self.lag_ms) / 1000.0
-        acts_s = arrives_s if self.mode == 'volts' else self.clock.acting_at(arrives_s)
+        acts_s = self.commander.acts_s(arrives_s) if self.mode != 'volts_at_instant' \
+            else self.clock.acting_at(arrives_s)
         volts = self.core.step(acts_s, reading, stamp_s)
-        command = tuple(float(v) for v in volts)
-        if self.mode == 'profile' and not self.core.unpowered:
-            command = profile_ahead(self.core, acts_s, self.clock.period_s)
-            self.sent_profiles += 1
+        command = self.commander.command(self.core, volts, acts_s) \
+            if self.mode != 'volts_at_instant' else tuple(float(v) for v in volts)
         jitter = int(self.rng.integers(-self.jitter_ms, self.jitter_ms + 1)) if self.jitter_ms \
             else 0
         self.commands.append((now_ms + max(self.lag_ms + jitter, 0), command))

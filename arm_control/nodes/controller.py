@@ -33,7 +33,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import uninstall_signal_handlers
 from rclpy.time import Time
 from sensor_msgs.msg import BatteryState, JointState
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
 from arm_control.config import ArmConfig, ControllerConfig
@@ -41,10 +41,9 @@ from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health
 from arm_control.control.latency import CommandDelay
-from arm_control.control.robot_command import profile_ahead, RobotClock
+from arm_control.control.robot_command import Commander
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
-from arm_control.model.profile import encode
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
                                       LATCHED, loop_statistics, PLANNER_AVAILABLE, run,
@@ -95,7 +94,7 @@ class ControllerNode(Node):
         self.loop_periods_s, self.loop_compute_s, self.last_tick_s = [], [], None
         self.reading_ages_s = []            # arrival minus stamp of each joint_states
         self.command_delay = CommandDelay(self.config.period_s)
-        self.robot_clock = RobotClock(self.config.period_s)    # from the readings' stamps
+        self.commander = Commander(self.config)     # what to send, for the robot's instants
         sys.setswitchinterval(0.001)   # another thread waits 1 ms for Python, not 5
 
         self.voltage_pub = self.create_publisher(Float64MultiArray, 'voltage_command', COMMANDS)
@@ -125,7 +124,8 @@ class ControllerNode(Node):
         self.create_timer(1.0, self.publish_diagnostics)
         priority = self.config.realtime_priority
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
-                                self.get_logger().warning, self.has_reading, self.plans.busy)
+                                self.get_logger().warning, self.has_reading, self.plans.busy,
+                                self.commander.tick_due)
         self.publish_outputs()
         self.loop.start()
         if priority:         # this thread spins the executor (where refused, the loop said so)
@@ -143,27 +143,12 @@ class ControllerNode(Node):
         return 0.0 if self.loop.simulated() else self.command_delay.delay_s
 
     def acts_s(self, sent_s: float) -> float:
-        """When a command sent at ``sent_s`` acts: on its arrival (``command_mode: volts``),
-        or a profile's first setpoint, at the robot's first instant after it (``RobotClock``)."""
-        arrives_s = sent_s + self.lag_s()
-        return self.robot_clock.acting_at(arrives_s) if self.config.command_mode == 'profile' \
-            else arrives_s
+        """When a command sent at ``sent_s`` acts (``Commander.acts_s``)."""
+        return self.commander.acts_s(sent_s + self.lag_s())
 
     def core_now_s(self) -> float:
         """The core's clock: the instant the command it computes now will act."""
         return self.acts_s(self.now_s())
-
-    def command_message(self, voltage, acts_s: float) -> Float64MultiArray:
-        """The step's command: a profile from ``acts_s`` (docs/robot_loop.md), else, or when
-        the core is at 0 V, the voltage pair."""
-        if self.config.command_mode != 'profile' or self.core.unpowered:
-            return Float64MultiArray(data=[float(v) for v in voltage])
-        dims, offset, data = encode(profile_ahead(self.core, acts_s, self.robot_clock.period_s))
-        message = Float64MultiArray(data=data)
-        message.layout.data_offset = offset
-        message.layout.dim = [MultiArrayDimension(label=label, size=size, stride=stride)
-                              for label, size, stride in dims]
-        return message
 
     def command(self, call, *args):
         """Call the core under the lock, then say what it said. A call that cuts the power
@@ -310,7 +295,7 @@ class ControllerNode(Node):
         began, now = time.perf_counter(), self.now_s()
         reading, self.reading = self.reading, None
         if reading is not None:
-            self.robot_clock.observe(reading[0].sampled_s)
+            self.commander.clock.observe(reading[0].sampled_s)
         acts_s = self.acts_s(now)
         with self.lock:
             try:
@@ -324,7 +309,8 @@ class ControllerNode(Node):
                     or self.core.state != self.last_state
                     or self.core.goals.queue.version != self.last_queue_version)
             if estimate is not None:     # before the first reading there is nothing to command
-                self.voltage_pub.publish(self.command_message(voltage, acts_s))
+                self.voltage_pub.publish(messages.voltage_command(
+                    self.commander.command(self.core, voltage, acts_s)))
         if estimate is not None:
             self.command_delay.sent(time.perf_counter() - began)
             stamp = Time(nanoseconds=round(acts_s * 1e9)).to_msg()     # what they are for

@@ -55,7 +55,7 @@ from std_srvs.srv import Trigger
 
 from arm_control.config import ArmConfig, JOINT_NAMES, SimConfig
 from arm_control.model.plant import ArmPlant
-from arm_control.model.profile import decode_command, ProfileError
+from arm_control.model.profile import ProfileError
 from arm_control.model.robot_commands import RobotCommands
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, loop_statistics, run,
@@ -195,8 +195,7 @@ class SimNode(Node):
 
     def on_voltage(self, msg: Float64MultiArray, info: dict) -> None:
         try:
-            command = decode_command(msg.data, [(d.label, d.size, d.stride)
-                                                for d in msg.layout.dim], msg.layout.data_offset)
+            command = messages.command_of(msg)
         except ProfileError as error:
             self.commands_rejected += 1
             self.get_logger().warning(
