@@ -169,8 +169,10 @@ def test_the_loop_runs_at_its_phase_and_stamps_its_readings_there(phase_s):
     heard = [decode_reading(v.value) for v in bridge.reading.readQueue()]
     bridge.close()
     robot.close()
+    # Wake-ups run late on a loaded machine, but near the phase: a loop at any phase would
+    # be late by 10 ms at the median.
     late_us = [(r.time_us - round(phase_s * 1e6)) % 20_000 for r in heard]
-    assert len(heard) > 20 and np.median(late_us) < 2_000
+    assert len(heard) > 20 and np.median(late_us) < 5_000
     acting = [r.time_us for r in heard if r.applied_voltage_v == (0.5, 0.5)]
     assert acting and min(acting) > sent_us
 

@@ -46,6 +46,7 @@ from arm_control.model.dynamics import ArmDynamics
 from arm_control.nodes import realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, LATCHED, run,
                                       STATE_STREAM, status)
+from arm_control.nodes.messages import command_of
 from arm_control.parameters import ParameterError
 
 IDENTITY = 'frc_bridge'             # how the robot's NT server sees this client
@@ -216,9 +217,7 @@ class FrcBridgeNode(Node):
     def on_voltage(self, msg: Float64MultiArray) -> None:
         """A voltage pair or a profile (``model.profile``): to the robot, for its instant."""
         try:
-            command = profiles.decode_command(
-                msg.data, [(d.label, d.size, d.stride) for d in msg.layout.dim],
-                msg.layout.data_offset)
+            command = command_of(msg)
         except profiles.ProfileError as error:
             self.refuse('voltage_command',
                         f'ignored voltage_command: {error}; the robot stops on its own when '
