@@ -29,11 +29,10 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, Header, String
 from std_srvs.srv import SetBool
 
-from arm_control.config import ArmConfig, JOINT_NAMES
+from arm_control.config import ArmConfig
 from arm_control.frc import contract as nt
 from arm_control.frc.codec import decode_reading, encode_profile, encode_voltage, profile_command
-from arm_control.frc.conversions import (battery_state_current_a, clamp_voltage, commanding,
-                                         joint_effort_nm, joint_pair, ros_stamp_ns,
+from arm_control.frc.conversions import (clamp_voltage, commanding, joint_pair, ros_stamp_ns,
                                          SetpointFeedforward)
 from arm_control.frc.mechanism import Mechanism2dPublisher
 from arm_control.frc.rules import LinkState, RobotLink, ZERO_V
@@ -46,6 +45,7 @@ from arm_control.model.dynamics import ArmDynamics
 from arm_control.nodes import realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, LATCHED, run,
                                       STATE_STREAM, status)
+from arm_control.nodes.frc_messages import age_summary, reading_messages
 from arm_control.nodes.messages import command_of
 from arm_control.parameters import ParameterError
 
@@ -57,6 +57,11 @@ SHUTDOWN_SEND_S = 0.05              # on exit, the last 0 V gets this long to le
 REFUSAL_LOG_PERIOD_S = 1.0          # bad input from one source is said at most this often
 LEVELS = {'info': DiagnosticStatus.OK, 'warning': DiagnosticStatus.WARN,
           'error': DiagnosticStatus.ERROR}
+STATE_STATUS = {
+    LinkState.ENABLED: (DiagnosticStatus.OK, 'robot enabled'),
+    LinkState.DISABLED: (DiagnosticStatus.WARN, 'robot disabled: 0 V'),
+    LinkState.CONNECTING: (DiagnosticStatus.WARN, 'waiting for the robot at {server}'),
+    LinkState.LOST: (DiagnosticStatus.ERROR, 'lost the robot: 0 V')}
 
 
 def stamp_s(header: Header) -> float:
@@ -93,11 +98,11 @@ class FrcBridgeNode(Node):
         self.connection_news = deque()  # from ntcore's listener thread
         self.dialled_s = 0.0            # when the robot was last tried (or seen connected)
 
-        self.joint_states_pub = self.create_publisher(JointState, 'joint_states', STATE_STREAM)
-        self.encoders_pub = self.create_publisher(JointState, 'motor_encoders', STATE_STREAM)
-        self.battery_pub = self.create_publisher(BatteryState, 'battery_state', STATE_STREAM)
-        self.currents_pub = self.create_publisher(Float64MultiArray, 'motor_currents',
-                                                  STATE_STREAM)
+        self.reading_pubs = {name: self.create_publisher(kind, name, STATE_STREAM)
+                             for name, kind in (('joint_states', JointState),
+                                                ('motor_encoders', JointState),
+                                                ('battery_state', BatteryState),
+                                                ('motor_currents', Float64MultiArray))}
         self.events_pub = self.create_publisher(String, '~/events', 100)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(Float64MultiArray, 'voltage_command', self.on_voltage, COMMANDS)
@@ -188,22 +193,9 @@ class FrcBridgeNode(Node):
         """One robot loop's reading, whole: every message gets its one stamp."""
         self.counts['readings'] += 1
         self.reading_ages_ms.append(1e-3 * (self.tables.server_now_us() - reading.time_us))
-        header = self.ros_stamp(reading.time_us)
-        current = reading.motor_current_a
-        effort = list(joint_effort_nm(current, self.dynamics)) \
-            if all(map(math.isfinite, current)) else []
-        self.joint_states_pub.publish(JointState(
-            header=header, name=list(JOINT_NAMES), position=list(reading.position_rad),
-            velocity=list(reading.velocity_rad_s), effort=effort))
-        if effort:
-            self.currents_pub.publish(Float64MultiArray(data=list(current)))
-        if all(map(math.isfinite, reading.encoder_rad)):
-            self.encoders_pub.publish(JointState(header=header, name=list(JOINT_NAMES),
-                                                 position=list(reading.encoder_rad)))
-        if math.isfinite(reading.bus_voltage_v):
-            self.battery_pub.publish(battery_state(
-                header, reading.bus_voltage_v,
-                battery_state_current_a(reading.supply_current_a)))
+        for name, message in reading_messages(reading, self.ros_stamp(reading.time_us),
+                                              self.dynamics).items():
+            self.reading_pubs[name].publish(message)
         self.draw('arm', reading.position_rad)
 
     def draw(self, root: str, position) -> None:
@@ -340,25 +332,14 @@ class FrcBridgeNode(Node):
 
     def publish_diagnostics(self, event=None) -> None:
         state = self.link.state
-        level, message = {
-            LinkState.ENABLED: (DiagnosticStatus.OK, 'robot enabled'),
-            LinkState.DISABLED: (DiagnosticStatus.WARN, 'robot disabled: 0 V'),
-            LinkState.CONNECTING: (DiagnosticStatus.WARN,
-                                   f'waiting for the robot at {self.config.server}'),
-            LinkState.LOST: (DiagnosticStatus.ERROR, 'lost the robot: 0 V'),
-        }[state]
+        level, message = STATE_STATUS[state]
+        message = message.format(server=self.config.server)
         if event is not None:
             level, message = LEVELS[event.level], event.message
         counts = {f'{name} (last s)': self.counts[name] - self.counts_said[name]
                   for name in self.counts}
-        ages_ms = sorted(self.reading_ages_ms)
-        if ages_ms and event is None:   # how old readings were when this process took them
-            counts['reading age p50 (ms, last s)'] = f'{ages_ms[len(ages_ms) // 2]:.2f}'
-            counts['reading age p99 (ms, last s)'] = \
-                f'{ages_ms[min(len(ages_ms) - 1, int(0.99 * len(ages_ms)))]:.2f}'
-            counts['reading age max (ms, last s)'] = f'{ages_ms[-1]:.2f}'
-            counts['readings older than 10 ms (last s)'] = sum(a > 10.0 for a in ages_ms)
         if event is None:
+            counts.update(age_summary(self.reading_ages_ms))
             self.counts_said = dict(self.counts)
             self.reading_ages_ms = []
         self.refused_said_s = {}        # when bad input from each source was last said
@@ -383,15 +364,6 @@ class FrcBridgeNode(Node):
             self.tables.close()
             if self.run_log is not None:
                 self.run_log.close()
-
-
-def battery_state(header: Header, bus_voltage_v: float, current_a: float) -> BatteryState:
-    """BatteryState with what the robot measures; the rest NaN, as the message asks."""
-    return BatteryState(header=header, voltage=bus_voltage_v, current=current_a,
-                        temperature=math.nan, charge=math.nan, capacity=math.nan,
-                        design_capacity=math.nan, percentage=math.nan, present=True,
-                        power_supply_status=BatteryState.POWER_SUPPLY_STATUS_DISCHARGING,
-                        power_supply_technology=BatteryState.POWER_SUPPLY_TECHNOLOGY_UNKNOWN)
 
 
 def main(args=None):
