@@ -220,6 +220,12 @@ def _read_joint(read: Reader, name: str, motors: dict) -> JointConfig:
     return joint
 
 
+# When the sim applies a command: at the robot loop's next instant, or the instant it arrives.
+COMMAND_TIMINGS = ('robot_loop', 'on_arrival')
+# What the controller sends on voltage_command: a profile (model/profile.py), or plain volts.
+COMMAND_MODES = ('profile', 'volts')
+
+
 @dataclass(frozen=True)
 class SimConfig:
     """The simulator's timing, start and noise seed."""
@@ -233,11 +239,17 @@ class SimConfig:
     random_seed: int
     sim_time_factor: float          # 0: the node's clock; else /clock at this × real time
     realtime_priority: int          # SCHED_FIFO priority of the stepping thread; 0: normal
+    command_timing: str = 'robot_loop'  # or 'on_arrival' (COMMAND_TIMINGS)
+    robot_loop_phase_s: float = 0.0     # the loop's instants, past each whole period
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'SimConfig':
         read = Reader(params)
         publish_rate_hz = read.number('publish_rate_hz', low=0.0, high=1000.0, low_open=True)
+        timing = read.text('command_timing')
+        if timing not in COMMAND_TIMINGS:
+            raise ParameterError(f"parameter 'command_timing' = {timing!r}: expected one of "
+                                 f'{list(COMMAND_TIMINGS)}')
         return cls(
             publish_rate_hz=publish_rate_hz,
             ground_truth_rate_hz=read.number('ground_truth_rate_hz', low=publish_rate_hz,
@@ -249,6 +261,9 @@ class SimConfig:
             random_seed=read.integer('random_seed', low=-1),
             sim_time_factor=read.number('sim_time_factor', low=0.0, high=100.0),
             realtime_priority=read.integer('realtime_priority', low=0, high=98),
+            command_timing=timing,
+            robot_loop_phase_s=read.number('robot_loop_phase_s', low=0.0,
+                                           high=1.0 / publish_rate_hz, low_open=False),
         )
 
 
@@ -279,6 +294,8 @@ class ControllerConfig:
     driver_max_speed_mps: float
     driver_command_timeout_s: float
     process_noise_rad_s2: float
+    command_mode: str = 'profile'           # or 'volts' (COMMAND_MODES)
+    robot_feedback_share: float = 0.25      # of the PD gains, closed by the robot in a profile
 
     @property
     def period_s(self) -> float:
@@ -294,6 +311,11 @@ class ControllerConfig:
                 raise ParameterError(f"parameter '{name}' = {list(pair)}: must be >= 0 "
                                      '(0: no cap beyond what the motors give)')
             return tuple(v if v > 0.0 else math.inf for v in pair)
+
+        mode = read.text('command_mode')
+        if mode not in COMMAND_MODES:
+            raise ParameterError(f"parameter 'command_mode' = {mode!r}: expected one of "
+                                 f'{list(COMMAND_MODES)}')
 
         def gains(name):
             triple = read.numbers(name, 3)
@@ -325,6 +347,8 @@ class ControllerConfig:
             driver_max_speed_mps=read.positive('driver_max_speed_mps'),
             driver_command_timeout_s=read.positive('driver_command_timeout_s'),
             process_noise_rad_s2=read.positive('process_noise_rad_s2'),
+            command_mode=mode,
+            robot_feedback_share=read.number('robot_feedback_share', low=0.0, high=1.0),
         )
 
     def check_against(self, arm: ArmConfig) -> None:

@@ -34,7 +34,8 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from arm_control.frc import contract as nt  # noqa: E402
-from arm_control.frc.tables import free_port, RobotTables  # noqa: E402
+from arm_control.frc.codec import encode_reading, Reading  # noqa: E402
+from arm_control.frc.tables import free_port, now_us, RobotTables  # noqa: E402
 from arm_control.nodes.common import COMMANDS, STATE_STREAM  # noqa: E402
 
 PERIOD_S = nt.LOOP_PERIOD_S
@@ -49,11 +50,10 @@ def robot_loop(tables: RobotTables, sent: dict, stop: threading.Event) -> None:
     next_s = time.monotonic()
     while not stop.is_set():
         k += 1
-        tables.publish(nt.ENABLED, True)
-        tables.publish(nt.VELOCITY, [0.0, 0.0])
         sent[k] = time.monotonic()
-        tables.publish(nt.POSITION, [k * SEQUENCE_RAD, 0.0])
-        tables.instance.flush()
+        time_us = now_us()
+        tables.publish(encode_reading(Reading(time_us, True, (k * SEQUENCE_RAD, 0.0),
+                                              (0.0, 0.0))), (0.0,) * 4, time_us)
         next_s += PERIOD_S
         stop.wait(max(0.0, next_s - time.monotonic()))
 
@@ -80,10 +80,10 @@ def main() -> None:
     def on_command(event) -> None:               # ntcore's thread: a command reached the robot
         arrived_s = time.monotonic()
         value = event.data.value
-        k = round(value.getDoubleArray()[0] / SEQUENCE_V)
+        k = round(value.getDoubleArray()[1] / SEQUENCE_V)
         if k > 0 and k not in commands_seen:
             commands_seen[k] = arrived_s
-    listener = tables.instance.addListener(tables.voltage, ntcore.EventFlags.kValueRemote,
+    listener = tables.instance.addListener(tables.command, ntcore.EventFlags.kValueRemote,
                                            on_command)
 
     with ros_domain() as domain, tempfile.TemporaryDirectory() as log_dir:

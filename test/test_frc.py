@@ -7,7 +7,6 @@ from pathlib import Path
 import re
 import time
 
-from hypothesis import given, settings, strategies as st
 import ntcore
 import numpy as np
 import pytest
@@ -29,28 +28,54 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_the_documented_contract_is_the_code_s():
     doc = (ROOT / 'docs' / 'frc_bridge.md').read_text()
     assert contract.markdown_table() in doc, 'docs/frc_bridge.md: paste contract.markdown_table()'
+    assert contract.layout_tables() in doc, 'docs/frc_bridge.md: paste contract.layout_tables()'
 
 
-def test_the_robot_side_example_parses_and_speaks_the_contract():
-    """docs/frc_bridge.md's robot.py: valid Python, and every NT topic it names is one of
-    the contract's, with the type the contract gives it."""
-    doc = (ROOT / 'docs' / 'frc_bridge.md').read_text()
-    example = doc.split('```python\n')[1].split('```')[0]
-    ast.parse(example)
+def test_the_layouts_tile_their_arrays():
+    """Every index of a reading is one field's; a profile point is 6 values after a head of 2."""
+    covered = [i for field in contract.READING_LAYOUT
+               for i in range(field.start, field.start + field.size)]
+    assert covered == list(range(contract.READING_SIZE))
+    assert sum(f.size for f in contract.VOLTAGE_LAYOUT) == contract.VOLTAGE_SIZE
+    assert sum(f.size for f in contract.PROFILE_HEAD) == contract.PROFILE_HEAD_SIZE
+    assert sum(f.size for f in contract.PROFILE_POINT) == contract.PROFILE_POINT_SIZE
+    assert contract.READING_LAYOUT[0].name == contract.VOLTAGE_LAYOUT[0].name == 'time_us'
+
+
+ROBOT_SIDE_TOPICS = [contract.READING, contract.COMMAND]
+
+
+def test_the_python_robot_example_parses_and_speaks_the_contract():
+    """docs/frc_robot/robot.py: valid Python, every NT topic it names is the contract's with
+    the contract's type, and its sizes are the layouts'."""
+    example = (ROOT / 'docs' / 'frc_robot' / 'robot.py').read_text()
+    tree = ast.parse(example)
+    named = dict((name, kind) for kind, name in
+                 re.findall(r"get(\w+?)Topic\('(/arm/[\w/]+)'\)", example))
+    kinds = {'DoubleArray': 'double[]', 'String': 'string', 'Boolean': 'boolean'}
     contract_types = {t.name: t.type for t in contract.TOPICS}
-    named = re.findall(r"get(\w+?)Topic\(f?'(/arm/[\w/{}]+)'\)", example)
-    named += [('DoubleArray', f'/arm/robot/{n}') for n in
-              re.findall(r"pub_array\('(\w+)'\)", example)]
-    named += [('DoubleArray', f'/arm/command/{n}') for n in
-              re.findall(r"sub_array\('(\w+)'\)", example)]
-    kinds = {'Double': 'double', 'DoubleArray': 'double[]', 'Boolean': 'boolean'}
-    checked = 0
-    for kind, name in named:
-        if '{' in name:
-            continue
-        assert contract_types.get(name) == kinds[kind], name
-        checked += 1
-    assert checked >= 12
+    assert {t.name for t in ROBOT_SIDE_TOPICS} <= set(named)
+    assert all(contract_types.get(name) == kinds[kind] for name, kind in named.items())
+    constants = {node.targets[0].id: ast.literal_eval(node.value) for node in tree.body
+                 if isinstance(node, ast.Assign) and isinstance(node.targets[0], ast.Name)
+                 and isinstance(node.value, ast.Constant)}
+    assert constants['READING_SIZE'] == contract.READING_SIZE
+    assert constants['VOLTAGE_SIZE'] == contract.VOLTAGE_SIZE
+    assert '_now' not in example, 'public API only'
+
+
+def test_the_java_robot_example_names_every_topic_the_robot_uses():
+    """docs/frc_robot/Robot.java (not compiled here): it names the robot's topics, fills the
+    reading in the layout's order and size, and uses the layouts' sizes."""
+    example = (ROOT / 'docs' / 'frc_robot' / 'Robot.java').read_text()
+    for topic in ROBOT_SIDE_TOPICS:
+        assert f'getDoubleArrayTopic("{topic.name}")' in example, topic.name
+    filled = example.split('readingPub.set(new double[] {')[1].split('}')[0]
+    assert len([v for v in filled.split(',') if v.strip()]) == contract.READING_SIZE
+    assert f'VOLTAGE_SIZE = {contract.VOLTAGE_SIZE};' in example
+    assert f'PROFILE_HEAD = {contract.PROFILE_HEAD_SIZE}, PROFILE_POINT = ' \
+        f'{contract.PROFILE_POINT_SIZE};' in example
+    assert 'nt.flush();' in example and 'getFPGATime()' in example
 
 
 def test_each_topic_once_and_each_side_in_its_own_table():
@@ -59,7 +84,6 @@ def test_each_topic_once_and_each_side_in_its_own_table():
     assert all(t.name.startswith('/arm/robot/') and t.publisher == 'robot'
                for t in contract.ROBOT_READINGS)
     assert all(t.publisher == 'bridge' for t in contract.COMMANDS)
-    assert all(t.name.startswith('/arm/command/') for t in contract.SETPOINT_COMMAND)
 
 
 # ---------------------------------------------------------------------- conversions
@@ -152,57 +176,6 @@ def test_feedforward_takes_no_acceleration_across_a_gap(arm):
     assert after_gap == pytest.approx(dynamics.voltage_for((0.5, 0.5), (2.0, 0.0), (0.0, 0.0)))
 
 
-# ---------------------------------------------------------------------- the robot's watchdog
-
-
-def test_a_command_drives_until_its_timeout_then_0v():
-    watchdog = rules.CommandWatchdog(0.1)
-    assert watchdog.offer('drive', sent_s=10.00, now_s=10.01) == ''
-    assert watchdog.segments(10.02, 10.04) == [(10.02, 10.04, 'drive')]
-    assert watchdog.segments(10.08, 10.14) == [(10.08, 10.1, 'drive'), (10.1, 10.14, None)]
-    assert watchdog.segments(10.14, 10.16) == [(10.14, 10.16, None)]
-
-
-def test_a_command_older_than_the_timeout_is_refused_not_applied_late():
-    watchdog = rules.CommandWatchdog(0.1)
-    assert 'stale: sent 0.500 s ago' in watchdog.offer('old', sent_s=9.5, now_s=10.0)
-    assert watchdog.segments(10.0, 10.02) == [(10.0, 10.02, None)]
-
-
-def test_a_command_older_than_the_one_held_is_refused():
-    watchdog = rules.CommandWatchdog(0.1)
-    watchdog.offer('new', sent_s=10.0, now_s=10.0)
-    assert 'not newer' in watchdog.offer('older', sent_s=9.99, now_s=10.0)
-    assert watchdog.command == 'new'
-
-
-def test_a_dropped_command_is_0v_at_once():
-    watchdog = rules.CommandWatchdog(0.1)
-    watchdog.offer('drive', sent_s=10.0, now_s=10.0)
-    watchdog.drop()
-    assert watchdog.segments(10.0, 10.02) == [(10.0, 10.02, None)]
-
-
-@settings(max_examples=200, deadline=None)
-@given(st.lists(st.tuples(st.floats(0.0, 0.2), st.floats(0.001, 0.3)), min_size=1,
-                max_size=30))
-def test_no_command_ever_drives_past_its_timeout(loops):
-    """Commands sent with random delays, loops run at random (late) times: every span a
-    command drives ends by its send time + timeout, and spans tile the time without gaps."""
-    timeout_s = 0.1
-    watchdog = rules.CommandWatchdog(timeout_s)
-    now_s = 0.0
-    for k, (delay_s, loop_s) in enumerate(loops):
-        start_s, now_s = now_s, now_s + loop_s
-        watchdog.offer(('command', k, now_s - delay_s), now_s - delay_s, now_s)
-        spans = watchdog.segments(start_s, now_s)
-        assert spans[0][0] == start_s and spans[-1][1] == now_s
-        assert all(a[1] == b[0] for a, b in zip(spans, spans[1:]))
-        for _, to_s, command in spans:
-            if command is not None:
-                assert to_s <= command[2] + timeout_s + 1e-12
-
-
 # ---------------------------------------------------------------------- the bridge's link
 
 
@@ -213,10 +186,11 @@ def test_the_link_goes_found_lost_back_with_one_event_each():
     assert event.state == rules.LinkState.ENABLED and 'robot found, enabled' in event.message
     assert event.controller_enabled is True
     assert link.may_command and link.outgoing((3.0, 4.0)) == (3.0, 4.0)
-    assert link.on_reading(1.02, robot_enabled=True) is None
-    assert link.check(1.11, nt_connected=True) is None            # 0.09 s: not yet
-    lost = link.check(1.13, nt_connected=True)
-    assert lost.level == 'error' and 'no readings for 0.11 s (NT still connected)' in \
+    assert link.check(1.0, nt_connected=True) is None
+    for k in range(1, 5):
+        assert link.check(1.0 + 0.02 * k, nt_connected=True) is None   # 0.08 s: not yet
+    lost = link.check(1.12, nt_connected=True)
+    assert lost.level == 'error' and 'no readings for 0.12 s (NT still connected)' in \
         lost.message and '0 V' in lost.message
     # Lost is not disabled: the controller stops as its joint states stop, and carries on
     # with its goals when they return.
@@ -361,18 +335,16 @@ def read_wpilog(path) -> dict:
 def test_the_wpilog_reads_back_with_names_units_times_and_values(tmp_path):
     path = tmp_path / 'logs' / 'run.wpilog'
     log = RunLog(path)
-    log.append(contract.POSITION.name, (0.5, -1.25), 1_000_000)
-    log.append(contract.POSITION.name, (0.6, -1.2), 1_020_000)
-    log.append(contract.BUS_VOLTAGE.name, 11.7, 1_020_000)
-    log.append(contract.ENABLED.name, True, 1_020_000)
+    log.append(contract.READING.name, (0.5, -1.25), 1_000_000)
+    log.append(contract.READING.name, (0.6, -1.2), 1_020_000)
+    log.append(contract.COMMAND.name, (1_020_000, 11.7, 0.0), 1_020_000)
     log.append(contract.ARM_STATE.name, 'tracking', 1_030_000)
     log.close()
     entries = read_wpilog(path)
-    kind, metadata, samples = entries[contract.POSITION.name]
-    assert kind == 'double[]' and json.loads(metadata) == {'unit': 'rad'}
+    kind, metadata, samples = entries[contract.READING.name]
+    assert kind == 'double[]' and json.loads(metadata) == {'unit': 'see the layout'}
     assert samples == [(1_000_000, [0.5, -1.25]), (1_020_000, [0.6, -1.2])]
-    assert entries[contract.BUS_VOLTAGE.name][2] == [(1_020_000, 11.7)]
-    assert entries[contract.ENABLED.name][2] == [(1_020_000, True)]
+    assert entries[contract.COMMAND.name][2] == [(1_020_000, [1_020_000, 11.7, 0.0])]
     assert entries[contract.ARM_STATE.name][:1] == ('string',)
     assert entries[contract.ARM_STATE.name][2] == [(1_030_000, 'tracking')]
 

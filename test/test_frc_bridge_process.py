@@ -1,11 +1,12 @@
-"""The bridge end to end on one machine: frc_robot_sim (a real ntcore NT4 server) stands in
-for the roboRIO; frc_bridge, controller and planner run as installed processes on their own
-ROS domain.
+"""The bridge end to end on one machine: frc_robot_sim (a real ntcore NT4 server, its robot
+loop at a phase of 7 ms) stands in for the roboRIO; frc_bridge, controller and planner run
+as installed processes on their own ROS domain.
 
 Where the arm went is measured on the stand-in's truth (``/arm/sim/true_state``), read by
 an NT client of the test's own, straight from the robot: never through the bridge. A lost
 connection is each side going silent (SIGSTOP), as the other side sees a pulled cable: the
-robot must stop the motors on its own, the bridge must say so and disable the controller.
+robot must hold the arm where its last profile ends on its own, the bridge must say it lost
+the robot, and the controller must stop as its joint states do.
 """
 
 import math
@@ -25,6 +26,7 @@ from std_msgs.msg import Float64MultiArray, String
 
 from arm_control import config
 from arm_control.frc import contract as nt
+from arm_control.frc.codec import decode_command, decode_reading, VoltageCommand
 from arm_control.frc.tables import free_port, LOOPBACK, now_us, RECEIVE
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
@@ -38,31 +40,41 @@ GOALS = [(1.1, 0.9), (0.9, 1.5)]
 
 
 class RobotWatch:
-    """The test's own NT client of the robot: its truth, what it applied, what it was sent,
-    and the Driver Station's enable."""
+    """The test's own NT client of the robot: its truth, its readings (what it applied,
+    whether it is enabled), what it was sent, and the Driver Station's enable."""
 
     def __init__(self, port: int):
         self.instance = ntcore.NetworkTableInstance.create()
         self.every = every = ntcore.PubSubOptions(sendAll=True, keepDuplicates=True,
                                                   pollStorage=2000, periodic=0.005)
         self.truth = self.instance.getDoubleArrayTopic(nt.TRUE_STATE.name).subscribe([], every)
-        self.applied = self.instance.getDoubleArrayTopic(nt.APPLIED_VOLTAGE.name).subscribe(
-            [], every)
-        self.commands = self.instance.getDoubleArrayTopic(nt.VOLTAGE_COMMAND.name).subscribe(
-            [], every)
-        self.enabled = self.instance.getBooleanTopic(nt.ENABLED.name).subscribe(False, every)
+        self.reading = self.instance.getDoubleArrayTopic(nt.READING.name).subscribe([], every)
+        self.command = self.instance.getDoubleArrayTopic(nt.COMMAND.name).subscribe([], every)
         self.enable = self.instance.getBooleanTopic(nt.SIM_ENABLE.name).publish()
         self.mechanism = ntcore.MultiSubscriber(self.instance, [nt.MECHANISM_TABLE + '/'],
                                                 RECEIVE)
         self.instance.startClient4('test watch')
         self.instance.setServer(LOOPBACK, port)
-        self.samples = {'truth': [], 'applied': [], 'commands': [], 'enabled': []}
+        self.samples = {'truth': [], 'applied': [], 'commands': [], 'enabled': [],
+                        'profiles': []}
 
     def poll(self) -> None:
-        """Move what arrived into ``samples``: (time on NT's clock in s, values)."""
-        for name in self.samples:
-            self.samples[name] += [(v.time * 1e-6, v.value)
-                                   for v in getattr(self, name).readQueue()]
+        """Move what arrived into ``samples``: (time on the robot's clock in s, values)."""
+        self.samples['truth'] += [(v.value[0] * 1e-6, v.value[1:])
+                                  for v in self.truth.readQueue()]
+        for value in self.reading.readQueue():
+            try:
+                reading = decode_reading(value.value)
+            except ValueError:          # the test's own bad readings
+                continue
+            t = reading.time_us * 1e-6
+            self.samples['applied'].append((t, list(reading.applied_voltage_v)))
+            self.samples['enabled'].append((t, reading.enabled))
+        for value in self.command.readQueue():
+            command = decode_command(value.value)
+            kind = 'commands' if isinstance(command, VoltageCommand) else 'profiles'
+            self.samples[kind].append((command.time_us * 1e-6, list(
+                command.voltage_v) if kind == 'commands' else command))
 
     def true_q(self) -> np.ndarray:
         self.poll()
@@ -74,15 +86,15 @@ class RobotWatch:
 
 
 class Rig:
-    def __init__(self, domain, probe, log_dir: Path, mode: str = 'voltage'):
+    def __init__(self, domain, probe, log_dir: Path, mode: str = 'voltage', phase_s=0.007):
         from ros_harness import install_prefix, NodeProcess, ros_environment
         self.probe, self.log_dir = probe, log_dir
         robot_port = free_port()
         self.robot_log = open(log_dir / 'frc_robot_sim.log', 'w')
         self.robot = subprocess.Popen(
             [str(install_prefix() / 'lib' / 'arm_control' / 'frc_robot_sim'), '--port',
-             str(robot_port)], env=ros_environment(domain), stdout=self.robot_log,
-            stderr=subprocess.STDOUT)
+             str(robot_port), '--phase-s', str(phase_s)], env=ros_environment(domain),
+            stdout=self.robot_log, stderr=subprocess.STDOUT)
         self.watch = RobotWatch(robot_port)
         self.wpilog = log_dir / 'run.wpilog'
         self.nodes = {
@@ -158,12 +170,13 @@ class Rig:
         self.watch.close()
 
 
-def running_rig(tmp_path_factory, mode: str):
-    """A ready Rig with the bridge in ``mode``, closed after the ``yield``."""
+def running_rig(tmp_path_factory, mode: str, phase_s: float = 0.007):
+    """A ready Rig with the bridge in ``mode``, the robot's loop at ``phase_s``, closed after
+    the ``yield``."""
     from ros_harness import Probe, ros_domain
     with ros_domain() as domain:
         probe = Probe(domain)
-        rig = Rig(domain, probe, tmp_path_factory.mktemp('frc'), mode)
+        rig = Rig(domain, probe, tmp_path_factory.mktemp('frc'), mode, phase_s)
         try:
             rig.ready()
             yield rig
@@ -273,26 +286,26 @@ def paused(process, seconds: float, rig) -> None:
         os.kill(process.pid, signal.SIGCONT)
 
 
-def test_the_robot_stops_within_0_1s_of_the_last_command_when_the_bridge_goes_silent(rig):
+def test_the_robot_holds_the_arm_where_its_profile_ends_when_the_bridge_goes_silent(rig):
+    """The controller sends profiles that end at rest with their holding volts: with the
+    bridge silent for half a second, the robot plays the last to its end and holds the arm
+    there (never a stale voltage, never a fall); then the controller carries on."""
     assert rig.spin_until(lambda: rig.state in ('waiting', 'holding'), 5.0)
     rig.probe.spin_for(0.3)
     rig.watch.poll()
+    assert rig.watch.samples['profiles'], 'the controller sends no profiles'
+    held_q = rig.watch.true_q()
     stopped_s = now_us() * 1e-6
     paused(rig.nodes['frc_bridge'].process, 0.5, rig)
     rig.watch.poll()
-    last_command_s = max(t for t, _ in rig.watch.samples['commands'] if t <= stopped_s + 0.05)
-    # Each sample is the voltage over the loop ending at its time: the last one that drove
-    # the motors ended within 0.1 s of the last command sent, and 0 V since.
-    after = [(t, v) for t, v in rig.watch.samples['applied'] if t > stopped_s]
-    driven = [t for t, v in after if v != [0.0, 0.0] and t < stopped_s + 0.45]
-    zero_from_s = max(driven, default=last_command_s)
-    assert zero_from_s - last_command_s <= 0.1 + 1e-3, \
-        f'0 V only {zero_from_s - last_command_s:.3f} s after the last command'
-    assert all(v == [0.0, 0.0] for t, v in after if zero_from_s < t < stopped_s + 0.45)
-    assert 'no fresh command for 0.1 s: 0 V' in rig.output('frc_robot_sim')
+    during = [(t, s) for t, s in rig.watch.samples['truth'] if stopped_s < t < stopped_s + 0.5]
+    assert len(during) > 15
+    assert max(np.max(np.abs(np.array(s[:2]) - held_q)) for _, s in during) < math.radians(1.0)
+    applied = [v for t, v in rig.watch.samples['applied'] if stopped_s < t < stopped_s + 0.5]
+    assert all(any(abs(x) > 0.3 for x in v) for v in applied)     # holding against gravity
     since = time.monotonic()
     assert rig.spin_until(lambda: rig.state in ('waiting', 'holding') and
-                          rig.held_at(rig.watch.true_q(), math.radians(3.0)), 10.0), \
+                          rig.held_at(rig.watch.true_q(), math.radians(1.0)), 10.0), \
         rig.said('', since, 'controller_events')
 
 
@@ -324,28 +337,26 @@ def test_bad_input_is_named_and_changes_nothing(rig):
     node = rig.probe.node
     voltage = node.create_publisher(Float64MultiArray, '/voltage_command', COMMANDS)
     setpoint = node.create_publisher(JointState, '/controller/setpoint', 10)
-    position = rig.watch.instance.getDoubleArrayTopic(nt.POSITION.name).publish()
+    reading = rig.watch.instance.getDoubleArrayTopic(nt.READING.name).publish()
     assert rig.spin_until(lambda: voltage.get_subscription_count() > 0 and
                           setpoint.get_subscription_count() > 0, 5.0)
     voltage.publish(Float64MultiArray(data=[1.0, 2.0, 3.0]))
     voltage.publish(Float64MultiArray(data=[math.nan, 0.0]))
     setpoint.publish(JointState(position=[0.5], velocity=[0.0, 0.0]))
     since = time.monotonic()
-    warning = 'ignored a reading: /arm/robot/position_rad: expected [shoulder, elbow], two ' \
-        'finite numbers, got [inf, 0.0]'
+    warning = 'ignored a reading: /arm/robot/reading: expected 14 values, got 2'
 
     def bad_reading_named():
         # Set again until named: a new publisher's first value did not reach the bridge
         # once in a fresh clone's run (the robot's own values went on arriving).
-        position.set([math.inf, 0.0])
+        reading.set([math.inf, 0.0])
         rig.watch.instance.flush()
         return warning in rig.output('frc_bridge')
     assert rig.spin_until(bad_reading_named, 5.0)
     assert rig.spin_until(lambda: len([1 for t, _ in rig.heard['joint_states']
                                        if t > since]) > 10, 5.0)
     said = rig.output('frc_bridge')
-    assert 'ignored voltage_command: expected [shoulder, elbow], two finite numbers, got ' \
-        '[1.0, 2.0, 3.0]' in said
+    assert said.count('ignored voltage_command: ') >= 1
     assert 'ignored controller/setpoint position: expected [shoulder, elbow]' in said
     assert rig.nodes['frc_bridge'].alive()
     assert all(math.isfinite(p) for t, m in rig.heard['joint_states'] if t > since
@@ -367,12 +378,12 @@ def test_the_run_is_a_wpilog_that_advantagescope_opens(rig):
     rig.watch.poll()
     assert rig.watch.samples['commands'][-1][1] == [0.0, 0.0]
     entries = read_wpilog(rig.wpilog)
-    positions = entries[nt.POSITION.name][2]
-    assert len(positions) > 100 and entries[nt.POSITION.name][0] == 'double[]'
-    times = [t for t, _ in positions]
+    readings = entries[nt.READING.name][2]
+    assert len(readings) > 100 and entries[nt.READING.name][0] == 'double[]'
+    times = [t for t, _ in readings]
     assert times == sorted(times)
     states = [v for _, v in entries[nt.ARM_STATE.name][2]]
     assert {'tracking', 'holding', 'disabled', 'no_sensors'} <= set(states)
     events = [v for _, v in entries['/bridge/events'][2]]
     assert any('lost the robot' in e for e in events)
-    assert entries[nt.VOLTAGE_COMMAND.name][2] and entries[nt.BUS_VOLTAGE.name][2]
+    assert entries[nt.COMMAND.name][2]

@@ -238,21 +238,26 @@ class Setpoints:
         self.driver.take_over(now_s, q, qd)
         self.driving = True
 
-    def brake(self, now_s: float) -> None:
-        """Come to rest from the current setpoint (along its path) and hold there."""
+    def stopping(self, now_s: float) -> Optional[Motion]:
+        """The motion that brings the setpoint at ``now_s`` to rest (along its path) and holds
+        there; None before any motion."""
         if self.driving:
             q, qd, _ = self.driver.sample(now_s)
-            self.driving = False
-            self.timeline.schedule(StraightStop(q, qd, now_s, self.max_acceleration)
-                                   if np.any(qd) else Motion(HoldTrajectory(q), now_s))
-            return
+            return StraightStop(q, qd, now_s, self.max_acceleration) if np.any(qd) \
+                else Motion(HoldTrajectory(q), now_s)
         motion = self.timeline.at(now_s)
         if motion is None:
-            return
+            return None
         if motion.finished(now_s):
-            self.hold(motion.final_q, now_s)
-        else:
-            self.timeline.schedule(StoppingMotion(motion, now_s, self.max_acceleration))
+            return Motion(HoldTrajectory(motion.final_q), now_s)
+        return StoppingMotion(motion, now_s, self.max_acceleration)
+
+    def brake(self, now_s: float) -> None:
+        """Come to rest from the current setpoint (along its path) and hold there."""
+        stop = self.stopping(now_s)
+        self.driving = False
+        if stop is not None:
+            self.timeline.schedule(stop)
 
     def moving_at(self, t_s: float) -> bool:
         return self.timeline.moving_at(t_s)

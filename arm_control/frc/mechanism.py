@@ -21,7 +21,7 @@ import math
 
 from arm_control.config import ArmConfig
 from arm_control.frc.contract import MECHANISM_TABLE
-from arm_control.frc.tables import SEND
+from arm_control.frc.tables import DRAW
 
 BACKGROUND = '#000020'             # Mechanism2d's own default, dark blue
 CANVAS_MARGIN_M = 0.2
@@ -64,7 +64,7 @@ class Mechanism2dPublisher:
         self.table = table
         self._publishers = {}
         type_topic = instance.getStringTopic(f'{table}/.type')
-        self._type = type_topic.publishEx('string', {'SmartDashboard': 'Mechanism2d'}, SEND)
+        self._type = type_topic.publishEx('string', {'SmartDashboard': 'Mechanism2d'}, DRAW)
         self._type.set('Mechanism2d')
         for name, value in layout(arm, table).items():
             self._set(name, value)
@@ -75,7 +75,7 @@ class Mechanism2dPublisher:
             topic = (self.instance.getStringTopic if isinstance(value, str) else
                      self.instance.getDoubleArrayTopic if isinstance(value, list) else
                      self.instance.getDoubleTopic)(name)
-            publisher = self._publishers[name] = topic.publish(SEND)
+            publisher = self._publishers[name] = topic.publish(DRAW)
         publisher.set(value)
 
     def show(self, root: str, position) -> None:

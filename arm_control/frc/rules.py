@@ -1,10 +1,7 @@
-"""What is fresh and what is allowed, on each side of the link.
-
-The robot side (``CommandWatchdog``): a command drives the motors until ``timeout_s`` after
-it was sent, then 0 V, like a motor controller's own CAN timeout; a command already older
-than that when it arrives is refused, never applied late. The bridge side (``RobotLink``):
-the controller's voltages go to the robot only while its readings are fresh and it is
-enabled, else 0 V; the controller is disabled and enabled with the robot.
+"""What is fresh and what is allowed, on the bridge's side of the link (``RobotLink``): the
+controller's commands go to the robot only while its readings are fresh and it is enabled,
+else 0 V; the controller is disabled and enabled with the robot. (The robot's side:
+``robot_loop``.)
 """
 
 from dataclasses import dataclass
@@ -12,50 +9,6 @@ from enum import Enum
 import math
 
 ZERO_V = (0.0, 0.0)
-
-
-class CommandWatchdog:
-    """The robot's rule for commands, on the NT clock (seconds).
-
-    ``offer`` takes a new command with the time it was sent; ``segments`` splits a span of
-    the robot loop into the part the command still drives and the part at 0 V. Nothing is
-    ever applied past ``sent + timeout_s``, however late the loop runs.
-    """
-
-    def __init__(self, timeout_s: float):
-        if not timeout_s > 0.0:
-            raise ValueError(f'command timeout must be > 0 s, got {timeout_s}')
-        self.timeout_s = timeout_s
-        self.command = None
-        self.sent_s = -math.inf
-
-    @property
-    def expires_s(self) -> float:
-        return self.sent_s + self.timeout_s
-
-    def offer(self, command, sent_s: float, now_s: float) -> str:
-        """Hold ``command`` from now on; return '' if taken, else why it was refused."""
-        if sent_s <= self.sent_s:
-            return f'not newer than the command held (sent {self.sent_s - sent_s:.3f} s earlier)'
-        age_s = now_s - sent_s
-        if age_s > self.timeout_s:
-            return f'stale: sent {age_s:.3f} s ago, more than {self.timeout_s:g} s'
-        self.command, self.sent_s = command, sent_s
-        return ''
-
-    def drop(self) -> None:
-        """Forget the command held (the robot was disabled): 0 V until a newer one."""
-        self.command = None
-
-    def segments(self, start_s: float, end_s: float) -> list[tuple[float, float, object]]:
-        """``(from_s, to_s, command)`` covering [start_s, end_s]: the command held until it
-        expires, then None (0 V)."""
-        expires_s = self.expires_s if self.command is not None else -math.inf
-        if expires_s >= end_s:
-            return [(start_s, end_s, self.command)]
-        if expires_s <= start_s:
-            return [(start_s, end_s, None)]
-        return [(start_s, expires_s, self.command), (expires_s, end_s, None)]
 
 
 class LinkState(str, Enum):
@@ -82,22 +35,37 @@ class LinkEvent:
 class RobotLink:
     """The bridge's view of the robot, on the bridge's clock (seconds).
 
+    The robot is lost when NT reports the connection down, or when no reading has come for
+    ``reading_timeout_s`` of the bridge's own *awake* time: each ``check`` adds the time
+    since the last one, but at most ``max_credit_s``, so a bridge that was starved of the
+    processor (its readings waiting in its socket) does not blame the robot for its own
+    sleep. A stamp that goes back (a restarted robot) counts as a reading like any other.
+
     The controller follows the robot's enable. A lost robot does not disable it: its joint
     states stop, so it stops commanding on its own (after ``joint_state_timeout_s``) and
     carries on with its goals when they return, as after any loss of its sensors.
     """
 
-    def __init__(self, reading_timeout_s: float):
+    def __init__(self, reading_timeout_s: float, max_credit_s: float = 0.04):
         if not reading_timeout_s > 0.0:
             raise ValueError(f'reading timeout must be > 0 s, got {reading_timeout_s}')
         self.reading_timeout_s = reading_timeout_s
+        self.max_credit_s = max_credit_s
         self.state = LinkState.CONNECTING
         self.last_reading_s = -math.inf
+        self.awake_s = 0.0                  # the bridge's awake time, summed by check()
+        self.awake_at_reading_s = 0.0
+        self.checked_s = None
 
     @property
     def may_command(self) -> bool:
         """Only a fresh, enabled robot is sent the controller's voltages."""
         return self.state == LinkState.ENABLED
+
+    @property
+    def silent_s(self) -> float:
+        """The bridge's awake time since the last reading."""
+        return self.awake_s - self.awake_at_reading_s
 
     def outgoing(self, voltage) -> tuple[float, float]:
         """The voltage to send: the controller's while the robot may be commanded, else 0 V."""
@@ -106,6 +74,7 @@ class RobotLink:
     def on_reading(self, now_s: float, robot_enabled: bool) -> LinkEvent | None:
         """A reading arrived, with the robot's enabled flag."""
         self.last_reading_s = now_s
+        self.awake_at_reading_s = self.awake_s
         state = LinkState.ENABLED if robot_enabled else LinkState.DISABLED
         if state == self.state:
             return None
@@ -119,13 +88,17 @@ class RobotLink:
                          False)
 
     def check(self, now_s: float, nt_connected: bool) -> LinkEvent | None:
-        """The readings stopped for longer than reading_timeout_s: the robot is lost."""
-        age_s = now_s - self.last_reading_s
-        if self.state in (LinkState.LOST, LinkState.CONNECTING) or \
-                age_s <= self.reading_timeout_s:
+        """The connection is down, or no reading for reading_timeout_s of awake time: lost."""
+        if self.checked_s is not None:
+            self.awake_s += min(max(now_s - self.checked_s, 0.0), self.max_credit_s)
+        self.checked_s = now_s
+        if self.state in (LinkState.LOST, LinkState.CONNECTING):
+            return None
+        if nt_connected and self.silent_s <= self.reading_timeout_s:
             return None
         self.state = LinkState.LOST
-        how = 'NT still connected' if nt_connected else 'NT disconnected'
+        why = (f'no readings for {self.silent_s:.2f} s (NT still connected)' if nt_connected
+               else 'NT disconnected')
         return LinkEvent(LinkState.LOST, 'error',
-                         f'lost the robot: no readings for {age_s:.2f} s ({how}): 0 V until '
-                         'it is back; the controller stops as its joint states do', None)
+                         f'lost the robot: {why}: 0 V until it is back; the controller stops '
+                         'as its joint states do', None)

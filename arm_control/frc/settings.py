@@ -1,9 +1,10 @@
 """The bridge's and the robot stand-in's settings, validated, from ``config/arm.yaml``
 (sections ``/frc_bridge`` and ``/frc_robot_sim``)."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Mapping
 
+from arm_control.model.profile import MAX_KD_V_S_PER_RAD, MAX_KP_V_PER_RAD
 from arm_control.parameters import ParameterError, read_parameter_files, Reader
 
 MODES = ('voltage', 'setpoint')
@@ -23,6 +24,13 @@ def _port(read: Reader, name: str) -> int:
     return port
 
 
+def _phase(phase_s: float, rate_hz: float, name: str) -> float:
+    if not 0.0 <= phase_s < 1.0 / rate_hz:
+        raise ParameterError(f"parameter '{name}' = {phase_s}: expected a phase within the "
+                             f'loop period, 0 <= phase < {1.0 / rate_hz:g} s')
+    return float(phase_s)
+
+
 @dataclass(frozen=True)
 class FrcBridgeConfig:
     """Where the robot is, what to send it, when it counts as lost, and where to log."""
@@ -31,8 +39,10 @@ class FrcBridgeConfig:
     server_address: str
     nt_port: int
     mode: str
+    setpoint_gains: tuple[tuple[float, float], tuple[float, float]]   # ((kp, kd), (kp, kd))
     reading_timeout_s: float
     wpilog_path: str
+    realtime_priority: int          # SCHED_FIFO priority of every thread; 0: normal
 
     @property
     def server(self) -> str:
@@ -55,8 +65,18 @@ class FrcBridgeConfig:
         mode = _string(params, 'mode')
         if mode not in MODES:
             raise ParameterError(f"parameter 'mode' = {mode!r}: expected one of {list(MODES)}")
+        gains = []
+        for name in ('shoulder_pd', 'elbow_pd'):
+            kp, kd = read.numbers(name, 2)
+            if not (0.0 <= kp <= MAX_KP_V_PER_RAD and 0.0 <= kd <= MAX_KD_V_S_PER_RAD):
+                raise ParameterError(f"parameter '{name}' = {[kp, kd]}: expected kp within "
+                                     f'[0, {MAX_KP_V_PER_RAD:g}] V/rad and kd within '
+                                     f'[0, {MAX_KD_V_S_PER_RAD:g}] V s/rad')
+            gains.append((kp, kd))
         return cls(team_number=team, server_address=address, nt_port=_port(read, 'nt_port'),
-                   mode=mode, reading_timeout_s=read.positive('reading_timeout_s'),
+                   mode=mode, setpoint_gains=tuple(gains),
+                   reading_timeout_s=read.positive('reading_timeout_s'),
+                   realtime_priority=read.integer('realtime_priority', low=0, high=98),
                    wpilog_path=_string(params, 'wpilog_path'))
 
 
@@ -66,17 +86,25 @@ class FrcRobotSimConfig:
 
     nt_port: int
     loop_rate_hz: float
+    loop_phase_s: float
     command_timeout_s: float
     start_enabled: bool
+    realtime_priority: int          # SCHED_FIFO priority of every thread; 0: normal
+
+    def with_phase(self, phase_s: float) -> 'FrcRobotSimConfig':
+        return replace(self, loop_phase_s=_phase(phase_s, self.loop_rate_hz, 'loop_phase_s'))
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'FrcRobotSimConfig':
         read = Reader(params)
+        rate_hz = read.number('loop_rate_hz', low=0.0, high=1000.0, low_open=True)
         return cls(
             nt_port=_port(read, 'nt_port'),
-            loop_rate_hz=read.number('loop_rate_hz', low=0.0, high=1000.0, low_open=True),
+            loop_rate_hz=rate_hz,
+            loop_phase_s=_phase(read.number('loop_phase_s'), rate_hz, 'loop_phase_s'),
             command_timeout_s=read.positive('command_timeout_s'),
             start_enabled=read.boolean('start_enabled'),
+            realtime_priority=read.integer('realtime_priority', low=0, high=98),
         )
 
 

@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 import socket
 import tempfile
+import threading
 
 import ntcore
 
@@ -17,11 +18,35 @@ from arm_control.frc import contract as nt
 LOOPBACK = '127.0.0.1'
 SEND = ntcore.PubSubOptions(periodic=0.005, keepDuplicates=True, sendAll=True)
 RECEIVE = ntcore.PubSubOptions(periodic=0.005, keepDuplicates=True, sendAll=True, pollStorage=50)
+DRAW_PERIOD_S = 0.04        # drawing (Mechanism2d) goes out at most this often, never flushed
+DRAW = ntcore.PubSubOptions(periodic=DRAW_PERIOD_S)
+
+
+class _NtClock:
+    """NT's clock (µs), through public API only: ntcore stamps a value set with time 0
+    with its own now. A private instance that is never started: nothing goes on the network."""
+
+    def __init__(self):
+        self.instance = ntcore.NetworkTableInstance.create()
+        topic = self.instance.getIntegerTopic('/clock')
+        options = ntcore.PubSubOptions(keepDuplicates=True)
+        self.publisher = topic.publish(options)
+        self.subscriber = topic.subscribe(0, options)
+        self.lock = threading.Lock()
+
+    def now_us(self) -> int:
+        with self.lock:
+            self.publisher.set(0)
+            return self.subscriber.getAtomic().time
+
+
+_CLOCK = _NtClock()
 
 
 def now_us() -> int:
-    """NT's clock (µs): the time base of every value's timestamp in this process."""
-    return ntcore._now()
+    """NT's clock (µs): the time base of every value's timestamp in this process (on the
+    server, the server clock itself)."""
+    return _CLOCK.now_us()
 
 
 def _publisher(instance, topic: nt.NtTopic, options=SEND):
@@ -39,33 +64,52 @@ def _subscriber(instance, topic: nt.NtTopic, options=RECEIVE):
 
 
 class BridgeTables:
-    """The bridge's NT4 client: the robot's readings in, commands and the arm's state out."""
+    """The bridge's NT4 client: the robot's readings in, commands and the arm's state out.
+
+    Commands are flushed the moment they are set, on a connection that carries nothing
+    else of size; drawing (``drawing``, for the Mechanism2d) has a connection of its own,
+    sent at ntcore's own pace and never flushed, so a command never waits behind it.
+    """
 
     def __init__(self, instance, identity: str, team_number: int, server_address: str,
-                 port: int):
+                 port: int, drawing: bool = True):
         self.instance = instance
-        self.readings = {topic: _subscriber(instance, topic) for topic in nt.ROBOT_READINGS}
-        self.voltage = _publisher(instance, nt.VOLTAGE_COMMAND)
-        self.setpoint = [_publisher(instance, topic) for topic in nt.SETPOINT_COMMAND]
+        self.reading = _subscriber(instance, nt.READING)
+        self.command = _publisher(instance, nt.COMMAND)
         self.state = _publisher(instance, nt.ARM_STATE)
-        instance.startClient4(identity)
+        self.drawing = ntcore.NetworkTableInstance.create() if drawing else None
+        self.identity, self.server = identity, (team_number, server_address, port)
+        for client, name in ((instance, identity), (self.drawing, f'{identity} drawing')):
+            if client is not None:
+                self._dial(client, name)
+
+    def _dial(self, client, name: str) -> None:
+        team_number, server_address, port = self.server
+        client.startClient4(name)
         if team_number:
-            instance.setServerTeam(team_number, port)
+            client.setServerTeam(team_number, port)
         else:
-            instance.setServer(server_address, port)
+            client.setServer(server_address, port)
+
+    def redial(self) -> None:
+        """Try the server now: ntcore's own retries come about once a second; a restarted
+        client tries at once (its publishers, subscribers and listeners stay)."""
+        self.instance.stopClient()
+        self._dial(self.instance, self.identity)
 
     def connected(self) -> bool:
         return self.instance.isConnected()
 
-    def send_voltage(self, voltage) -> None:
-        self.voltage.set([float(v) for v in voltage])
-        self.instance.flush()
+    def server_offset_us(self) -> int:
+        """server clock − this process's NT clock (µs); 0 until ntcore has measured it."""
+        return self.instance.getServerTimeOffset() or 0
 
-    def send_setpoint(self, position, velocity, feedforward_v) -> None:
-        """The three parts with one timestamp, so the robot sees one command."""
-        sent_us = now_us()
-        for publisher, values in zip(self.setpoint, (position, velocity, feedforward_v)):
-            publisher.set([float(v) for v in values], sent_us)
+    def server_now_us(self) -> int:
+        return now_us() + self.server_offset_us()
+
+    def send_command(self, values) -> None:
+        """A command (``codec.encode_voltage``/``encode_profile``), flushed at once."""
+        self.command.set([float(v) for v in values])
         self.instance.flush()
 
     def send_state(self, state: str) -> None:
@@ -73,9 +117,11 @@ class BridgeTables:
         self.instance.flush()
 
     def close(self) -> None:
-        """Stop the client and ntcore's threads (their listeners with them)."""
-        self.instance.stopClient()
-        ntcore.NetworkTableInstance.destroy(self.instance)
+        """Stop the clients and ntcore's threads (their listeners with them)."""
+        for client in (self.instance, self.drawing):
+            if client is not None:
+                client.stopClient()
+                ntcore.NetworkTableInstance.destroy(client)
 
 
 class RobotTables:
@@ -84,19 +130,30 @@ class RobotTables:
     def __init__(self, instance, port: int):
         _check_port_free(port)
         self.instance = instance
-        self.readings = {topic: _publisher(instance, topic) for topic in nt.ROBOT_READINGS}
+        self.reading = _publisher(instance, nt.READING)
         self.true_state = _publisher(instance, nt.TRUE_STATE)
-        self.voltage = _subscriber(instance, nt.VOLTAGE_COMMAND)
-        self.setpoint = [_subscriber(instance, topic) for topic in nt.SETPOINT_COMMAND]
+        self.command = _subscriber(instance, nt.COMMAND)
         self.enable = _subscriber(instance, nt.SIM_ENABLE)
         # NT4 keeps "persistent" topics in a file; a stand-in keeps none.
         self._persist_dir = tempfile.TemporaryDirectory(prefix='frc_robot_sim_')
-        persist_file = Path(self._persist_dir.name) / 'networktables.json'
-        persist_file.write_text('[]')
-        instance.startServer(str(persist_file), LOOPBACK, 0, port)     # 0: no NT3 port
+        self._persist_file = Path(self._persist_dir.name) / 'networktables.json'
+        self._persist_file.write_text('[]')
+        self.port = port
+        self.serve()
 
-    def publish(self, topic: nt.NtTopic, value, time_us: int = 0) -> None:
-        self.readings[topic].set(value, time_us)
+    def serve(self) -> None:
+        """Serve NT4 (again, after ``stop_serving``: a robot that comes back)."""
+        self.instance.startServer(str(self._persist_file), LOOPBACK, 0, self.port)  # 0: no NT3
+
+    def stop_serving(self) -> None:
+        """Drop every connection, as a robot that loses its network."""
+        self.instance.stopServer()
+
+    def publish(self, reading_values, true_state, time_us: int) -> None:
+        """One loop's reading (and the sim's truth), stamped ``time_us``, flushed at once."""
+        self.reading.set(reading_values, time_us)
+        self.true_state.set([float(time_us), *true_state], time_us)
+        self.instance.flush()
 
     def close(self) -> None:
         """Stop the server and ntcore's threads (their listeners with them)."""

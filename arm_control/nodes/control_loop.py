@@ -1,7 +1,9 @@
 """The control loop's beat: ``tick`` once per period on the node's clock, in a thread of its
 own at real-time priority where allowed, so that no callback, burst of messages, graph change
 or busy process delays a command. A plan that becomes ready wakes it at once (``poke``): the
-motion starts then, not at the next period, and the periods run on from there.
+motion starts then, not at the next period, and the periods run on from there. In real time
+``align(due_s)`` moves each next tick (the node's: to just after the robot loop's instants,
+``Commander.tick_due``).
 
 In simulated time the sim steps once per command, so a tick is an answer to one step: it
 waits (up to ``SIM_INPUT_WAIT_S`` of wall time) until ``has_input(now)`` says the step's
@@ -35,9 +37,9 @@ class ControlLoop:
     ``priority_problem`` says why the thread could not run at ``realtime_priority``."""
 
     def __init__(self, clock, period_s: float, tick, realtime_priority: int = 0, warn=print,
-                 has_input=lambda now_s: True, working=lambda: False):
+                 has_input=lambda now_s: True, working=lambda: False, align=lambda due_s: due_s):
         self.clock, self.period_s, self.tick = clock, period_s, tick
-        self.has_input, self.working = has_input, working
+        self.has_input, self.working, self.align = has_input, working, align
         self.realtime_priority, self.warn = realtime_priority, warn
         self.priority_problem = None
         self.last_tick_s = None             # the clock's time at the last tick
@@ -113,6 +115,8 @@ class ControlLoop:
                 # one (a clock two steps on must not leave a tick due at the same time).
                 late = poked or now > due_s + self.period_s or self.simulated()
                 due_s = (now if late else due_s) + self.period_s
+                if not self.simulated():
+                    due_s = self.align(due_s)
                 continue
             wait_s = due_s - now
             if self.simulated():

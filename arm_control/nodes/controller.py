@@ -41,6 +41,7 @@ from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health
 from arm_control.control.latency import CommandDelay
+from arm_control.control.robot_command import Commander
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.nodes import messages, realtime
@@ -92,6 +93,7 @@ class ControllerNode(Node):
         self.loop_periods_s, self.loop_compute_s, self.last_tick_s = [], [], None
         self.reading_ages_s = []            # arrival minus stamp of each joint_states
         self.command_delay = CommandDelay(self.config.period_s)
+        self.commander = Commander(self.config)     # what to send, for the robot's instants
         sys.setswitchinterval(0.001)   # another thread waits 1 ms for Python, not 5
 
         self.voltage_pub = self.create_publisher(Float64MultiArray, 'voltage_command', COMMANDS)
@@ -121,7 +123,8 @@ class ControllerNode(Node):
         self.create_timer(1.0, self.publish_diagnostics)
         priority = self.config.realtime_priority
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
-                                self.get_logger().warning, self.has_reading, self.plans.busy)
+                                self.get_logger().warning, self.has_reading, self.plans.busy,
+                                self.commander.tick_due)
         self.publish_outputs()
         self.loop.start()
         if priority:         # this thread spins the executor (where refused, the loop said so)
@@ -138,9 +141,13 @@ class ControllerNode(Node):
         none: the sim applies a step's command from the step's start."""
         return 0.0 if self.loop.simulated() else self.command_delay.delay_s
 
+    def acts_s(self, sent_s: float) -> float:
+        """When a command sent at ``sent_s`` acts (``Commander.acts_s``)."""
+        return self.commander.acts_s(sent_s + self.lag_s())
+
     def core_now_s(self) -> float:
         """The core's clock: the instant the command it computes now will act."""
-        return self.now_s() + self.lag_s()
+        return self.acts_s(self.now_s())
 
     def command(self, call, *args):
         """Call the core under the lock, then say what it said. A call that cuts the power
@@ -285,8 +292,10 @@ class ControllerNode(Node):
 
     def tick(self) -> None:
         began, now = time.perf_counter(), self.now_s()
-        acts_s = now + self.lag_s()
         reading, self.reading = self.reading, None
+        if reading is not None:
+            self.commander.clock.observe(reading[0].sampled_s)
+        acts_s = self.acts_s(now)
         with self.lock:
             try:
                 voltage = self.core.step(acts_s, *(reading or (None, None)))
@@ -299,7 +308,8 @@ class ControllerNode(Node):
                     or self.core.state != self.last_state
                     or self.core.goals.queue.version != self.last_queue_version)
             if estimate is not None:     # before the first reading there is nothing to command
-                self.voltage_pub.publish(Float64MultiArray(data=[float(v) for v in voltage]))
+                self.voltage_pub.publish(messages.voltage_command(
+                    self.commander.command(self.core, voltage, acts_s)))
         if estimate is not None:
             self.command_delay.sent(time.perf_counter() - began)
             stamp = Time(nanoseconds=round(acts_s * 1e9)).to_msg()     # what they are for
@@ -316,7 +326,7 @@ class ControllerNode(Node):
         """From the worker's result thread: the plan to the core, from when the next command
         acts (in simulated time the next step, if this one's went out), and the loop runs."""
         with self.lock:
-            self.core.on_timed_plan(self.loop.next_command_s() + self.lag_s(), timed)
+            self.core.on_timed_plan(self.acts_s(self.loop.next_command_s()), timed)
         self.loop.poke()
 
     # ------------------------------------------------------------------ outputs

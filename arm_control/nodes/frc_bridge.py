@@ -1,14 +1,17 @@
 """The ``frc_bridge`` node: a real FRC robot (or ``frc_robot_sim``) in the sim's place.
 
-An NT4 client (pyntcore) of the roboRIO, found by team number or address. The robot's
-readings become ``joint_states``, ``motor_encoders`` (JointState), ``battery_state``
-(BatteryState) and ``motor_currents`` (Float64MultiArray), stamped when the robot took
-them. ``voltage_command`` goes to the robot with its NT timestamp (mode ``voltage``), or
-the controller's ``controller/setpoint`` with the model's feedforward (mode ``setpoint``),
-for a loop on the roboRIO. A disabled robot, or one whose readings stop for
-``reading_timeout_s`` (an error), gets 0 V. The controller is disabled and enabled with the
-robot (``controller/enable``); when the robot is lost, its joint states stop, and it stops
-commanding on its own. Publishes the arm as a Mechanism2d on NT,
+An NT4 client (pyntcore) of the roboRIO, found by team number or address. Each of the
+robot's readings (one NT value per robot loop) becomes ``joint_states``, ``motor_encoders``
+(JointState), ``battery_state`` (BatteryState) and ``motor_currents`` (Float64MultiArray),
+all stamped with the instant the robot read its sensors. ``voltage_command`` goes to the
+robot, flushed at once: a voltage pair as a command for the instant it is sent, a profile
+(``model.profile``) with its start on the robot's clock; in mode ``setpoint``, instead of
+the controller's voltages, its ``controller/setpoint`` with the model's feedforward as a
+one-setpoint profile for its stamp. A disabled robot, a dropped connection, or one
+whose readings stop for ``reading_timeout_s`` (an error) gets 0 V. The controller is
+disabled and enabled with the robot (``controller/enable``); when the robot is lost, its
+joint states stop, and it stops commanding on its own. Draws the arm as a Mechanism2d on NT
+(its own connection, at most 25 Hz),
 ``~/events`` (String) and ``/diagnostics``; logs the run as a .wpilog when ``wpilog_path``
 is set. The rules live in ``arm_control.frc``; this shell only wires ROS to them.
 """
@@ -26,29 +29,39 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, Header, String
 from std_srvs.srv import SetBool
 
-from arm_control.config import ArmConfig, JOINT_NAMES
+from arm_control.config import ArmConfig
 from arm_control.frc import contract as nt
-from arm_control.frc.conversions import (battery_state_current_a, clamp_voltage, commanding,
-                                         finite_number, joint_effort_nm, joint_pair,
-                                         ros_stamp_ns, SetpointFeedforward)
+from arm_control.frc.codec import decode_reading, encode_profile, encode_voltage, profile_command
+from arm_control.frc.conversions import (clamp_voltage, commanding, joint_pair, ros_stamp_ns,
+                                         SetpointFeedforward)
 from arm_control.frc.mechanism import Mechanism2dPublisher
 from arm_control.frc.rules import LinkState, RobotLink, ZERO_V
 from arm_control.frc.settings import FrcBridgeConfig
-from arm_control.frc.tables import BridgeTables, now_us
+from arm_control.frc.tables import BridgeTables, DRAW_PERIOD_S, now_us
 from arm_control.frc.wpilog import (BRIDGE_EVENTS, CONTROLLER_SETPOINT,
                                     CONTROLLER_SETPOINT_VELOCITY, CONTROLLER_VOLTAGE, RunLog)
+from arm_control.model import profile as profiles
 from arm_control.model.dynamics import ArmDynamics
+from arm_control.nodes import realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, LATCHED, run,
                                       STATE_STREAM, status)
+from arm_control.nodes.frc_messages import age_summary, reading_messages
+from arm_control.nodes.messages import command_of
 from arm_control.parameters import ParameterError
 
 IDENTITY = 'frc_bridge'             # how the robot's NT server sees this client
 SETPOINT_MAX_AGE_S = 0.1            # mode setpoint: an older setpoint is not sent
 ENABLE_RETRY_S = 0.5                # controller/enable not there: ask again this often
+REDIAL_PERIOD_S = 0.2               # disconnected: try the robot again this often
 SHUTDOWN_SEND_S = 0.05              # on exit, the last 0 V gets this long to leave
 REFUSAL_LOG_PERIOD_S = 1.0          # bad input from one source is said at most this often
 LEVELS = {'info': DiagnosticStatus.OK, 'warning': DiagnosticStatus.WARN,
           'error': DiagnosticStatus.ERROR}
+STATE_STATUS = {
+    LinkState.ENABLED: (DiagnosticStatus.OK, 'robot enabled'),
+    LinkState.DISABLED: (DiagnosticStatus.WARN, 'robot disabled: 0 V'),
+    LinkState.CONNECTING: (DiagnosticStatus.WARN, 'waiting for the robot at {server}'),
+    LinkState.LOST: (DiagnosticStatus.ERROR, 'lost the robot: 0 V')}
 
 
 def stamp_s(header: Header) -> float:
@@ -73,10 +86,9 @@ class FrcBridgeNode(Node):
                 raise ParameterError(
                     f"parameter 'wpilog_path' = {self.config.wpilog_path!r}: {error}") from error
         self.started = time.monotonic()
-        self.setpoint = None            # (position, velocity, feedforward_v, received at)
-        self.velocity = None            # the robot's latest velocity, effort and supply current
-        self.effort = []
-        self.supply_current_a = math.nan
+        self.setpoint = None            # (position, velocity, feedforward_v, received at, stamp)
+        self.drawn_s = {'arm': -math.inf, 'setpoint': -math.inf}
+        self.reading_ages_ms = []       # sensors' instant -> taken here, since the last report
         self.counts = {'readings': 0, 'commands sent': 0, 'inputs refused': 0}
         self.counts_said = dict(self.counts)
         self.refused_said_s = {}        # when bad input from each source was last said
@@ -84,12 +96,13 @@ class FrcBridgeNode(Node):
         self.enable_call = None
         self.enable_asked_s = -math.inf
         self.connection_news = deque()  # from ntcore's listener thread
+        self.dialled_s = 0.0            # when the robot was last tried (or seen connected)
 
-        self.joint_states_pub = self.create_publisher(JointState, 'joint_states', STATE_STREAM)
-        self.encoders_pub = self.create_publisher(JointState, 'motor_encoders', STATE_STREAM)
-        self.battery_pub = self.create_publisher(BatteryState, 'battery_state', STATE_STREAM)
-        self.currents_pub = self.create_publisher(Float64MultiArray, 'motor_currents',
-                                                  STATE_STREAM)
+        self.reading_pubs = {name: self.create_publisher(kind, name, STATE_STREAM)
+                             for name, kind in (('joint_states', JointState),
+                                                ('motor_encoders', JointState),
+                                                ('battery_state', BatteryState),
+                                                ('motor_currents', Float64MultiArray))}
         self.events_pub = self.create_publisher(String, '~/events', 100)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(Float64MultiArray, 'voltage_command', self.on_voltage, COMMANDS)
@@ -101,16 +114,19 @@ class FrcBridgeNode(Node):
         self.instance = ntcore.NetworkTableInstance.create()
         self.tables = BridgeTables(self.instance, IDENTITY, self.config.team_number,
                                    self.config.server_address, self.config.nt_port)
-        self.mechanism = Mechanism2dPublisher(self.instance, self.arm)
+        self.mechanism = Mechanism2dPublisher(self.tables.drawing, self.arm)
         # ntcore calls listeners on its own thread: they only wake the executor, which
-        # reads the values on this node's thread. The robot sets the position last in each
-        # loop, so that one wakes it for all the loop's readings.
+        # reads the values on this node's thread.
         self.nt_wake = self.create_guard_condition(self.on_nt)
         self.listeners = [
-            self.instance.addListener(self.tables.readings[nt.POSITION],
+            self.instance.addListener(self.tables.reading,
                                       ntcore.EventFlags.kValueRemote, lambda _: self.wake()),
             self.instance.addConnectionListener(False, self.on_connection)]
 
+        # Every thread there is now (ntcore's, DDS's, this one) at real-time priority.
+        problem = realtime.raise_process(self.config.realtime_priority)
+        if problem:
+            self.get_logger().warning(problem)
         self.create_timer(nt.LOOP_PERIOD_S, self.check_link)
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
@@ -153,88 +169,84 @@ class FrcBridgeNode(Node):
                 self.get_logger().info(f'NT4 connected to {ip}:{port}')
             else:
                 self.get_logger().warning(f'NT4 disconnected from {ip}:{port}')
-        nt_now, ros_now = now_us(), self.get_clock().now().nanoseconds
-        readings = self.tables.readings
-
-        def header(value) -> Header:
-            stamp_ns = ros_stamp_ns(value.time, nt_now, ros_now)
-            return Header(stamp=Time(sec=stamp_ns // 1_000_000_000,
-                                     nanosec=stamp_ns % 1_000_000_000), frame_id='')
-
-        for value in readings[nt.ENABLED].readQueue():
-            self.record(nt.ENABLED, bool(value.value), value.time)
-        for value in readings[nt.APPLIED_VOLTAGE].readQueue():
-            self.record(nt.APPLIED_VOLTAGE, value.value, value.time)
-        for value in readings[nt.VELOCITY].readQueue():
-            velocity = self.checked(joint_pair, value, nt.VELOCITY)
-            if velocity is not None:
-                self.velocity = velocity
-        for value in readings[nt.MOTOR_CURRENT].readQueue():
-            current = self.checked(joint_pair, value, nt.MOTOR_CURRENT)
-            if current is not None:
-                self.effort = list(joint_effort_nm(current, self.dynamics))
-                self.currents_pub.publish(Float64MultiArray(data=list(current)))
-        for value in readings[nt.SUPPLY_CURRENT].readQueue():
-            supply_a = self.checked(finite_number, value, nt.SUPPLY_CURRENT)
-            if supply_a is not None:
-                self.supply_current_a = supply_a
-        for value in readings[nt.BUS_VOLTAGE].readQueue():
-            bus_v = self.checked(finite_number, value, nt.BUS_VOLTAGE)
-            if bus_v is not None:
-                self.battery_pub.publish(battery_state(
-                    header(value), bus_v, battery_state_current_a(self.supply_current_a)))
-        for value in readings[nt.ENCODER].readQueue():
-            encoder = self.checked(joint_pair, value, nt.ENCODER)
-            if encoder is not None:
-                self.encoders_pub.publish(JointState(header=header(value),
-                                                     name=list(JOINT_NAMES),
-                                                     position=list(encoder)))
-        for value in readings[nt.POSITION].readQueue():
-            position = self.checked(joint_pair, value, nt.POSITION)
-            if position is None:
+        if not self.tables.connected():
+            self.on_link_event(self.link.check(self.now_s(), False))    # dropped: say so now
+        for value in self.tables.reading.readQueue():
+            try:
+                reading = decode_reading(value.value)
+            except ValueError as error:
+                self.refuse(nt.READING.name, f'ignored a reading: {error}')
                 continue
-            self.counts['readings'] += 1
-            self.joint_states_pub.publish(JointState(
-                header=header(value), name=list(JOINT_NAMES), position=list(position),
-                velocity=list(self.velocity or ()), effort=self.effort))
-            self.mechanism.show('arm', position)
-            enabled = readings[nt.ENABLED].getAtomic()
-            if enabled.time:                # a reading counts once the robot said its mode
-                self.on_link_event(self.link.on_reading(self.now_s(), enabled.value))
+            self.record(nt.READING, value.value, reading.time_us - self.tables.server_offset_us())
+            self.publish_reading(reading)
+            self.on_link_event(self.link.on_reading(self.now_s(), reading.enabled))
 
-    def checked(self, convert, value, topic: nt.NtTopic):
-        """``convert(value)``, logged; None (and a warning) if the robot sent nonsense."""
-        try:
-            converted = convert(value.value, topic.name)
-        except ValueError as error:
-            self.refuse(topic.name, f'ignored a reading: {error}')
-            return None
-        self.record(topic, converted, value.time)
-        return converted
+    def ros_stamp(self, server_time_us: int) -> Header:
+        """A time on the NT server's clock as a ROS header stamp (ntcore's offset to the
+        server, then this process's NT clock against ROS's)."""
+        local_us = server_time_us - self.tables.server_offset_us()
+        stamp_ns = ros_stamp_ns(local_us, now_us(), self.get_clock().now().nanoseconds)
+        return Header(stamp=Time(sec=stamp_ns // 1_000_000_000,
+                                 nanosec=stamp_ns % 1_000_000_000), frame_id='')
+
+    def publish_reading(self, reading) -> None:
+        """One robot loop's reading, whole: every message gets its one stamp."""
+        self.counts['readings'] += 1
+        self.reading_ages_ms.append(1e-3 * (self.tables.server_now_us() - reading.time_us))
+        for name, message in reading_messages(reading, self.ros_stamp(reading.time_us),
+                                              self.dynamics).items():
+            self.reading_pubs[name].publish(message)
+        self.draw('arm', reading.position_rad)
+
+    def draw(self, root: str, position) -> None:
+        """The Mechanism2d, at most every DRAW_PERIOD_S: its own connection, never flushed."""
+        if self.now_s() - self.drawn_s[root] >= DRAW_PERIOD_S:
+            self.drawn_s[root] = self.now_s()
+            self.mechanism.show(root, position)
 
     # ------------------------------------------------------------------ ROS -> robot
 
     def on_voltage(self, msg: Float64MultiArray) -> None:
+        """A voltage pair or a profile (``model.profile``): to the robot, for its instant."""
         try:
-            voltage = clamp_voltage(joint_pair(msg.data, 'voltage_command'),
-                                    self.arm.battery.nominal_voltage)
-        except ValueError as error:
+            command = command_of(msg)
+        except profiles.ProfileError as error:
             self.refuse('voltage_command',
-                        f'ignored {error}; the robot stops on its own when commands stop')
+                        f'ignored voltage_command: {error}; the robot stops on its own when '
+                        'commands stop')
             return
-        self.record(CONTROLLER_VOLTAGE, voltage)
+        if isinstance(command, profiles.Profile):
+            if self.link.may_command:
+                start_us = self.server_time_us(round(command.start_s * 1e9))
+                self.send(encode_profile(profile_command(start_us, command)))
+            else:
+                self.send(encode_voltage(self.tables.server_now_us(), ZERO_V))
+            self.record(CONTROLLER_VOLTAGE, list(msg.data))
+            return
+        voltage = clamp_voltage(command, self.arm.battery.nominal_voltage)
         outgoing = self.link.outgoing(voltage)
         if self.config.mode == 'voltage' or not commanding(outgoing):
-            self.tables.send_voltage(outgoing)
-            self.record(nt.VOLTAGE_COMMAND, outgoing)
+            self.send(encode_voltage(self.tables.server_now_us(), outgoing))
         elif self.setpoint is not None and \
                 self.now_s() - self.setpoint[3] <= SETPOINT_MAX_AGE_S:
-            self.tables.send_setpoint(*self.setpoint[:3])
-            for topic, values in zip(nt.SETPOINT_COMMAND, self.setpoint[:3]):
-                self.record(topic, values)
-        else:
-            return      # no fresh setpoint: nothing, and the robot's own timeout stops it
+            position, velocity, feedforward_v, _, stamp_ns = self.setpoint
+            self.send(encode_profile(profile_command(
+                self.server_time_us(stamp_ns), profiles.Profile(
+                    0.0, nt.LOOP_PERIOD_S, self.config.setpoint_gains,
+                    (profiles.Setpoint(position, velocity, feedforward_v),)))))
+        # else nothing: no fresh setpoint, and the robot's own timeout stops it
+        self.record(CONTROLLER_VOLTAGE, voltage)
+
+    def send(self, command) -> None:
+        """A command to the robot, flushed at once; logged after it has gone."""
+        self.tables.send_command(command)
         self.counts['commands sent'] += 1
+        self.record(nt.COMMAND, command)
+
+    def server_time_us(self, ros_stamp_ns: int) -> int:
+        """A ROS stamp on the NT server's clock: its age on the ROS clock, back from now."""
+        age_us = (self.get_clock().now().nanoseconds - ros_stamp_ns) // 1000
+        return self.tables.server_now_us() - age_us
 
     def on_setpoint(self, msg: JointState) -> None:
         try:
@@ -245,8 +257,9 @@ class FrcBridgeNode(Node):
             return
         if self.config.mode == 'setpoint':
             feedforward_v = self.feedforward(stamp_s(msg.header), position, velocity)
-            self.setpoint = (position, velocity, feedforward_v, self.now_s())
-        self.mechanism.show('setpoint', position)
+            stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            self.setpoint = (position, velocity, feedforward_v, self.now_s(), stamp_ns)
+        self.draw('setpoint', position)
         self.record(CONTROLLER_SETPOINT, position)
         self.record(CONTROLLER_SETPOINT_VELOCITY, velocity)
 
@@ -257,9 +270,15 @@ class FrcBridgeNode(Node):
     # ------------------------------------------------------------------ the link
 
     def check_link(self) -> None:
-        if self.now_s() - self.link.last_reading_s > self.config.reading_timeout_s:
+        if self.link.silent_s > 0.5 * self.config.reading_timeout_s:
             self.on_nt()        # what arrived while this process was busy is not lost time
-        self.on_link_event(self.link.check(self.now_s(), self.tables.connected()))
+        connected = self.tables.connected()
+        self.on_link_event(self.link.check(self.now_s(), connected))
+        if connected:
+            self.dialled_s = self.now_s()
+        elif self.now_s() - self.dialled_s >= REDIAL_PERIOD_S:
+            self.dialled_s = self.now_s()
+            self.tables.redial()
         self.tell_controller()
 
     def on_link_event(self, event) -> None:
@@ -275,8 +294,7 @@ class FrcBridgeNode(Node):
         self.events_pub.publish(String(data=event.message))
         self.record(BRIDGE_EVENTS, event.message)
         if not self.link.may_command:
-            self.tables.send_voltage(ZERO_V)
-            self.record(nt.VOLTAGE_COMMAND, ZERO_V)
+            self.send(encode_voltage(self.tables.server_now_us(), ZERO_V))
         if event.controller_enabled is not None:
             self.enable_wanted = event.controller_enabled
             self.enable_asked_s = -math.inf
@@ -314,19 +332,16 @@ class FrcBridgeNode(Node):
 
     def publish_diagnostics(self, event=None) -> None:
         state = self.link.state
-        level, message = {
-            LinkState.ENABLED: (DiagnosticStatus.OK, 'robot enabled'),
-            LinkState.DISABLED: (DiagnosticStatus.WARN, 'robot disabled: 0 V'),
-            LinkState.CONNECTING: (DiagnosticStatus.WARN,
-                                   f'waiting for the robot at {self.config.server}'),
-            LinkState.LOST: (DiagnosticStatus.ERROR, 'lost the robot: 0 V'),
-        }[state]
+        level, message = STATE_STATUS[state]
+        message = message.format(server=self.config.server)
         if event is not None:
             level, message = LEVELS[event.level], event.message
         counts = {f'{name} (last s)': self.counts[name] - self.counts_said[name]
                   for name in self.counts}
         if event is None:
+            counts.update(age_summary(self.reading_ages_ms))
             self.counts_said = dict(self.counts)
+            self.reading_ages_ms = []
         self.refused_said_s = {}        # when bad input from each source was last said
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()
@@ -341,7 +356,7 @@ class FrcBridgeNode(Node):
     def on_shutdown(self) -> None:
         """0 V on the way out; then ntcore's threads stopped before Python's go away."""
         try:
-            self.tables.send_voltage(ZERO_V)
+            self.tables.send_command(encode_voltage(self.tables.server_now_us(), ZERO_V))
             time.sleep(SHUTDOWN_SEND_S)     # NT4 has no acknowledgement: give it time to go
         finally:
             for listener in self.listeners:
@@ -349,15 +364,6 @@ class FrcBridgeNode(Node):
             self.tables.close()
             if self.run_log is not None:
                 self.run_log.close()
-
-
-def battery_state(header: Header, bus_voltage_v: float, current_a: float) -> BatteryState:
-    """BatteryState with what the robot measures; the rest NaN, as the message asks."""
-    return BatteryState(header=header, voltage=bus_voltage_v, current=current_a,
-                        temperature=math.nan, charge=math.nan, capacity=math.nan,
-                        design_capacity=math.nan, percentage=math.nan, present=True,
-                        power_supply_status=BatteryState.POWER_SUPPLY_STATUS_DISCHARGING,
-                        power_supply_technology=BatteryState.POWER_SUPPLY_TECHNOLOGY_UNKNOWN)
 
 
 def main(args=None):

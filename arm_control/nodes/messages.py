@@ -9,10 +9,11 @@ from typing import Optional
 
 from geometry_msgs.msg import PoseStamped, Quaternion
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
+from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension
 
 from arm_control.config import FRAME_ID, JOINT_NAMES
 from arm_control.control.events import quote
+from arm_control.model.profile import decode_command, encode, Profile
 
 # Names (a preset, a frame) longer than this are refused before they are logged or echoed.
 MAX_NAME_CHARS = 64
@@ -84,3 +85,22 @@ def joint_state(stamp, position, velocity=(), effort=()) -> JointState:
                       position=[float(p) for p in position],
                       velocity=[float(v) for v in velocity],
                       effort=[float(e) for e in effort])
+
+
+def voltage_command(command) -> Float64MultiArray:
+    """A voltage pair, or a Profile (``model/profile.py``: its layout and data)."""
+    if not isinstance(command, Profile):
+        return Float64MultiArray(data=[float(v) for v in command])
+    dims, offset, data = encode(command)
+    message = Float64MultiArray(data=data)
+    message.layout.data_offset = offset
+    message.layout.dim = [MultiArrayDimension(label=label, size=size, stride=stride)
+                          for label, size, stride in dims]
+    return message
+
+
+def command_of(message: Float64MultiArray):
+    """A voltage_command's pair or Profile; ProfileError saying what is wrong."""
+    return decode_command(message.data, [(d.label, d.size, d.stride)
+                                         for d in message.layout.dim],
+                          message.layout.data_offset)

@@ -12,8 +12,13 @@ last reading go out with it, each stamped at its own instant, so that a move mea
 it is timed to a few milliseconds instead of to the reading period. (At 4× simulated time,
 500 a second of wall time had a Python subscriber 2 s behind: the rate is of wall time.)
 
-A command acts from when it arrives: the physics is brought up to that instant with the
-previous one first. No command for ``command_timeout_s`` -> 0 V, as a disabled robot. The
+``command_timing: robot_loop`` (as a roboRIO): the sensors are read, and the latest command
+that has arrived applied, only at the robot loop's instants, ``robot_loop_phase_s`` past each
+whole period of the clock; a reading is stamped at its instant. ``on_arrival``: a command
+acts from when it arrives (the physics brought up to that instant with the previous one
+first). A command is a voltage pair or a profile the sim plays at the loop's instants on the
+reading it takes there (``RobotCommands``, ``model/profile.py``). No plain command for
+``command_timeout_s`` -> 0 V, as a disabled robot; a profile ends held. The
 sim's own late ticks are not the robot's: up to ``MAX_CATCH_UP_S`` since the physics last
 moved (a period and the usual jitter) is simulated with the command the robot had; the rest
 of a longer stall of the sim (the process paused, or starved on a loaded machine) is a pause
@@ -50,6 +55,8 @@ from std_srvs.srv import Trigger
 
 from arm_control.config import ArmConfig, JOINT_NAMES, SimConfig
 from arm_control.model.plant import ArmPlant
+from arm_control.model.profile import ProfileError
+from arm_control.model.robot_commands import RobotCommands
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, loop_statistics, run,
                                       STATE_STREAM, status)
@@ -75,9 +82,15 @@ class SimNode(Node):
         if self.config.rest_until_first_command:
             self.plant.rest()
         self.simulated_time = self.config.sim_time_factor > 0.0
+        self.robot_loop = self.config.command_timing == 'robot_loop'
+        self.commands = RobotCommands(self.arm.battery.nominal_voltage,
+                                      self.config.command_timeout_s)
+        self.period_s = 1.0 / self.config.publish_rate_hz
         self.wall_clock = Clock(clock_type=ClockType.STEADY_TIME)
         self.epoch_s = self.get_clock().now().nanoseconds * 1e-9   # sim time at plant time 0
-        self.clock_origin_s = self.now_s()        # plant time 0
+        self.clock_origin_s = self.now_s()        # plant time 0: on the robot loop, an instant
+        if self.robot_loop and not self.simulated_time:
+            self.clock_origin_s = self.instant_s(self.clock_origin_s)
         self.last_command_s = -math.inf
         self.timed_out = True
         self.commands_rejected = self.commands_rejected_said = 0
@@ -102,7 +115,6 @@ class SimNode(Node):
         self.create_subscription(Float64MultiArray, 'voltage_command', self.on_voltage, COMMANDS)
         self.create_subscription(JointState, '~/set_state', self.on_set_state, COMMANDS)
         self.create_service(Trigger, '~/reset', self.on_reset)
-        self.period_s = 1.0 / self.config.publish_rate_hz
         # The rate is of wall time: faster than real time, as many messages a second (the
         # subscribers' load), fewer samples a simulated second.
         speed = max(1.0, self.config.sim_time_factor)
@@ -116,8 +128,10 @@ class SimNode(Node):
                               clock=self.wall_clock)
             self.create_timer(1.0 / self.config.sim_time_factor, self.publish_diagnostics,
                               clock=self.wall_clock)
-        else:
-            self.create_timer(self.period_s, self.step)
+        else:                   # a timer's phase is that of its creation: on the robot loop,
+            start_s = self.period_s if not self.robot_loop else \
+                self.instant_s(self.now_s()) + self.period_s - self.now_s()
+            self.starter = self.create_timer(start_s, self.start_stepping)
             self.create_timer(1.0, self.publish_diagnostics)
         priority = self.config.realtime_priority
         self.priority_problem = realtime.raise_this_thread(priority)   # the one that steps
@@ -133,6 +147,17 @@ class SimNode(Node):
             return self.epoch_s + self.plant.time_s
         return self.get_clock().now().nanoseconds * 1e-9
 
+    def instant_s(self, t_s: float) -> float:
+        """The robot loop's last instant at or before ``t_s`` (real time)."""
+        phase = self.config.robot_loop_phase_s
+        return phase + math.floor((t_s - phase) / self.period_s + 1e-6) * self.period_s
+
+    def start_stepping(self) -> None:
+        """The periodic step from now: at an instant of the robot loop when on it."""
+        self.destroy_timer(self.starter)
+        self.create_timer(self.period_s, self.step)
+        self.step()
+
     def stamp(self):
         return Time(nanoseconds=round(self.now_s() * 1e9)).to_msg() if self.simulated_time \
             else self.get_clock().now().to_msg()
@@ -143,9 +168,13 @@ class SimNode(Node):
             return                                    # time is the physics' own
         behind_s = now_s - self.clock_origin_s - self.plant.time_s
         if behind_s > MAX_CATCH_UP_S:                 # the sim stalled: the world waited
-            self.clock_origin_s += behind_s - MAX_CATCH_UP_S
-            behind_s = MAX_CATCH_UP_S
-        self.advance(math.floor(behind_s / self.plant.physics_step_s + 1e-9))
+            pause_s = behind_s - MAX_CATCH_UP_S
+            if self.robot_loop:                       # whole periods: plant time 0 an instant
+                pause_s = math.ceil(pause_s / self.period_s - 1e-9) * self.period_s
+            self.clock_origin_s += pause_s
+            self.commands.pair_s += pause_s           # the command aged with the world
+            behind_s -= pause_s
+        self.advance(math.floor(behind_s / self.plant.physics_step_s + 1e-3))
 
     @property
     def origin_s(self) -> float:
@@ -165,31 +194,44 @@ class SimNode(Node):
                                     self.plant.effort_nm()))
 
     def on_voltage(self, msg: Float64MultiArray, info: dict) -> None:
-        voltage = list(msg.data)
-        if len(voltage) != 2 or not messages.finite(voltage):
+        try:
+            command = messages.command_of(msg)
+        except ProfileError as error:
             self.commands_rejected += 1
             self.get_logger().warning(
-                f'rejected a voltage_command of {len(voltage)} values: expected '
-                '[shoulder_V, elbow_V], finite; keeping the last good command',
-                throttle_duration_sec=1.0)
+                f'rejected a voltage_command of {len(msg.data)} values: {str(error)[:300]}; '
+                'expected [shoulder_V, elbow_V] or a profile (docs/robot_loop.md); keeping '
+                'the last good command', throttle_duration_sec=1.0)
             return
         now = self.now_s()
-        self.catch_up(now)
-        self.plant.set_voltage(voltage)
+        self.commands.arrive(now, command)
+        if not self.robot_loop:                   # it acts now, on the sensors of now
+            self.catch_up(now)
+            self.commands.take(now)
+            position = velocity = None            # a pair needs no reading
+            if self.commands.playing:
+                position, velocity = self.plant.sensors.potentiometers(self.plant.state[:2],
+                                                                       self.plant.state[2:])
+            self.apply(now, position, velocity)
         self.last_command_s = now
         self.command_transits_s.append((time.time_ns() - info['source_timestamp']) * 1e-9)
         if self.simulated_time and info['source_timestamp'] < self.reading_sent_ns:
             self.late_commands += 1
         else:
             self.commanded_this_period = True
-        if self.plant.resting:
-            self.plant.release()
-            self.get_logger().info('first voltage command: the arm leaves its rest')
         if self.timed_out:
             self.timed_out = False
             self.get_logger().info('voltage commands arriving')
         if self.simulated_time:     # the next period now, if its wall time has come
             self.step()
+
+    def apply(self, t_s: float, position, velocity) -> None:
+        """The commands' volts from ``t_s`` on the sensors' (q, q̇) of then; the first command
+        taken releases the arm from its rest."""
+        self.plant.set_voltage(self.commands.volts(t_s, position, velocity))
+        if self.plant.resting and self.commands.taken:
+            self.plant.release()
+            self.get_logger().info('first voltage command: the arm leaves its rest')
 
     def on_set_state(self, msg: JointState) -> None:
         position = messages.joint_pair(msg, 'position')
@@ -209,6 +251,8 @@ class SimNode(Node):
         self.catch_up(self.now_s())
         self.plant.reset(self.config.initial_position)
         self.plant.set_voltage((0.0, 0.0))
+        self.commands = RobotCommands(self.arm.battery.nominal_voltage,
+                                      self.config.command_timeout_s)
         if self.config.rest_until_first_command:
             self.plant.rest()
         response.success = True
@@ -234,21 +278,26 @@ class SimNode(Node):
             self.commanded_this_period, self.period_began_wall_s = False, wall_s
             self.advance(round(self.period_s / self.plant.physics_step_s))
         now = self.now_s()
+        instant = self.instant_s(now) if self.robot_loop and not self.simulated_time else now
         stalled = now - self.last_step_s > 2.0 * self.period_s     # the sim's, not the robot's
         self.periods_s.append(now - self.last_step_s)
         self.last_step_s = now
         timeout_s = self.config.command_timeout_s
-        if not stalled and now - self.last_command_s > timeout_s:
-            if not self.timed_out:
-                self.timed_out = True
-                self.get_logger().warning(
-                    f'no voltage_command for {timeout_s:g} s: applying 0 V')
+        if not stalled and now - self.last_command_s > timeout_s and not self.timed_out:
+            self.timed_out = True
+            self.get_logger().warning(f'no voltage_command for {timeout_s:g} s'
+                                      + ('' if self.commands.playing else ': applying 0 V'))
+            if not self.robot_loop and not self.commands.playing:
                 self.catch_up(self.last_command_s + timeout_s)
-            self.plant.set_voltage((0.0, 0.0))
-        self.catch_up(now)
+                self.plant.set_voltage((0.0, 0.0))
+        self.catch_up(instant)
+        reading = self.plant.read()
+        if self.robot_loop:
+            self.commands.take(instant)
+        self.apply(instant, reading.potentiometer_rad, reading.velocity_rad_s)
         self.say_brownouts()
         self.reading_sent_ns = time.time_ns()
-        self.publish(self.plant.read())
+        self.publish(reading)
         if self.simulated_time:     # after the reading: the controller's tick then finds it
             self.clock_pub.publish(ClockMessage(clock=self.stamp()))
 
@@ -265,7 +314,7 @@ class SimNode(Node):
     def publish(self, reading) -> None:
         """One instant's reading; ``joint_states`` last, so that a controller reading it finds
         the encoders and the bus of the same instant already there."""
-        stamp = self.stamp()
+        stamp = Time(nanoseconds=round((self.origin_s + reading.time_s) * 1e9)).to_msg()
         self.encoders_pub.publish(messages.joint_state(stamp, reading.encoder_rad,
                                                        reading.encoder_velocity_rad_s))
         # The true states since the last reading, then the reading's, each at its instant.

@@ -1,0 +1,141 @@
+"""What the controller sends the robot, and for which instant.
+
+A robot reads its sensors and applies the latest command it has at its own loop's instants,
+so a command acts at the first instant after it arrives: anywhere from 0 to a whole period
+after it was sent. Each reading is stamped at one of those instants, so the readings' stamps
+give the loop (``RobotClock``): the controller computes each command for the robot's next
+instant after it can arrive (with ``ARRIVAL_MARGIN_S`` to spare), ticks just after the
+robot's instants (``TICK_AFTER_INSTANT_S``), and sends a profile
+(``model/profile.py``) that the robot plays at its loop:
+
+- setpoint 0, at that instant: the reference the controller's step tracks (its
+  feedforward's model of the arm), with that step's volts less the share
+  (``robot_feedback_share``) of its P and D terms that the robot closes on its own reading
+  of the same instant, with that share of the gains. Read where the controller's estimate
+  has the arm, the robot applies the controller's volts exactly; what it reads differently
+  it corrects at once. The robot's raw potentiometers are noisier than the filtered
+  estimate, hence a share: the integral stays in the volts (it is slow);
+- setpoints 1 to ``AHEAD - 1``: the motion's own setpoints, one robot period apart, with
+  the inverse dynamics' volts at each period's middle -- a command that comes a period late,
+  or is lost, leaves the robot on the motion, not on a stale voltage;
+- then a stop to rest along the path the arm is on (``Setpoints.stopping``), ending at rest
+  with its holding volts: played to its end with nothing newer, a profile leaves the arm held.
+"""
+
+from collections import deque
+import math
+import statistics
+
+import numpy as np
+
+from arm_control.model.profile import Profile, Setpoint
+
+AHEAD = 3                     # setpoints along the motion before the stop
+# A command is aimed at the robot's first instant at least this long after it is expected
+# to arrive: its compute and its way there vary, and a profile that comes after the instant
+# it was for is played a period late (its first setpoint missed), one that comes early waits.
+ARRIVAL_MARGIN_S = 0.003
+# Sending profiles, the controller ticks this long after each of the robot's instants: the
+# instant's reading has come, and the command reaches the robot well before the next one,
+# so every command acts one period after the reading it answers, whatever the phase.
+TICK_AFTER_INSTANT_S = 0.003
+CLOCK_WINDOW = 25             # readings' gaps the robot's period is the median of
+
+
+class RobotClock:
+    """The robot loop's instants, from the stamps of the readings (each taken at one)."""
+
+    def __init__(self, nominal_period_s: float):
+        self.nominal_period_s = float(nominal_period_s)
+        self.period_s = self.nominal_period_s
+        self.last_s = None                     # the latest reading's stamp
+        self.gaps_s = deque(maxlen=CLOCK_WINDOW)
+
+    def observe(self, stamp_s: float) -> None:
+        """A reading stamped ``stamp_s`` (s); a missed reading leaves a gap of whole periods."""
+        if not math.isfinite(stamp_s) or (self.last_s is not None and stamp_s <= self.last_s):
+            return
+        if self.last_s is not None:
+            gap = stamp_s - self.last_s
+            periods = round(gap / self.period_s)
+            if periods >= 1 and abs(gap - periods * self.period_s) < 0.25 * self.period_s:
+                self.gaps_s.append(gap / periods)
+                median = statistics.median(self.gaps_s)
+                self.period_s = min(max(median, 0.5 * self.nominal_period_s),
+                                    2.0 * self.nominal_period_s)
+        self.last_s = float(stamp_s)
+
+    def acting_at(self, arrives_s: float) -> float:
+        """The instant a command expected to arrive at ``arrives_s`` is computed for."""
+        return self.next_instant(arrives_s + ARRIVAL_MARGIN_S)
+
+    def next_instant(self, t_s: float) -> float:
+        """The robot's first instant at or after ``t_s`` that is after its last reading
+        (a command cannot act at an instant whose reading it was computed from); ``t_s``
+        before any reading."""
+        if self.last_s is None:
+            return t_s
+        periods = max(math.ceil((t_s - self.last_s) / self.period_s - 1e-6), 1)
+        return self.last_s + periods * self.period_s
+
+
+class Commander:
+    """What the controller sends and for when (``command_mode``): a profile for the robot's
+    instant after the command arrives, or plain volts for its arrival; at 0 V, 0 V."""
+
+    def __init__(self, config):
+        self.period_s = config.period_s
+        self.clock = RobotClock(config.period_s)
+        self.profiles = config.command_mode == 'profile'
+
+    def tick_due(self, due_s: float) -> float:
+        """The controller's next tick, due at ``due_s``, moved to the nearest time
+        ``TICK_AFTER_INSTANT_S`` after a robot instant -- when sending profiles to a robot
+        whose loop runs at the controller's rate (within 1 %); else ``due_s``."""
+        clock = self.clock
+        if not self.profiles or clock.last_s is None or \
+                abs(clock.period_s - self.period_s) > 0.01 * self.period_s:
+            return due_s
+        periods = round((due_s - TICK_AFTER_INSTANT_S - clock.last_s) / clock.period_s)
+        return clock.last_s + periods * clock.period_s + TICK_AFTER_INSTANT_S
+
+    def acts_s(self, arrives_s: float) -> float:
+        """When a command that arrives at ``arrives_s`` acts, as the core computes it."""
+        return self.clock.acting_at(arrives_s) if self.profiles else arrives_s
+
+    def command(self, core, voltage, acts_s: float):
+        """The core's last step as a Profile from ``acts_s``, or its voltage pair."""
+        if self.profiles and not core.unpowered:
+            return profile_ahead(core, acts_s, self.clock.period_s)
+        return tuple(float(v) for v in voltage)
+
+
+def profile_ahead(core, start_s: float, step_s: float) -> Profile:
+    """The profile from the core's last step, taken for the robot's instant ``start_s``,
+    its setpoints ``step_s`` apart (the module's rule)."""
+    share = core.config.robot_feedback_share
+    gains = tuple((share * kp, share * kd) for kp, _, kd in (core.config.shoulder_pid,
+                                                             core.config.elbow_pid))
+    integral = np.array(core.pid.integral_v)
+    proportional_derivative = np.asarray(core.feedback_v) - integral
+    reference = core.feedforward.state
+    first = Setpoint(tuple(map(float, reference[:2])), tuple(map(float, reference[2:])),
+                     tuple(map(float, core.feedforward_v + integral
+                               + (1.0 - share) * proportional_derivative)))
+    stop_s = start_s + AHEAD * step_s
+    stop = core.setpoints.stopping(stop_s)
+    if stop is None:                         # no motion yet: the reference, held
+        return Profile(float(start_s), float(step_s), gains, (first,))
+    count = max(math.ceil((stop.end_s - stop_s) / step_s - 1e-9), 0) + 1
+    times = list(start_s + step_s * np.arange(1, AHEAD)) + \
+        list(stop_s + step_s * np.arange(count))
+
+    def sample(t):
+        return core.setpoints.sample(t) if t < stop_s - 1e-9 else stop.sample(t)
+    samples = [sample(t) for t in times]
+    middles = [sample(t + 0.5 * step_s) for t in times]
+    middles[-1] = samples[-1] = (stop.final_q, np.zeros(2), np.zeros(2))   # held, at rest
+    volts = core.feedforward.dynamics.voltages(*(np.array(v) for v in zip(*middles)))
+    rest = [Setpoint(tuple(map(float, q)), tuple(map(float, qd)), tuple(map(float, v + integral)))
+            for (q, qd, _), v in zip(samples, volts)]
+    return Profile(float(start_s), float(step_s), gains, (first, *rest))

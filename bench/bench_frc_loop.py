@@ -1,0 +1,360 @@
+"""The arm on a robot's clock, over NT4: goals, whole readings, transit, disable and drops,
+at robot-loop phases spread over the period, idle and beside two busy processes.
+
+The robot is ``frc_robot_sim``'s loop (``RobotStandIn``: a real ntcore NT4 server running
+the loop docs/frc_bridge.md prescribes) in this process, so what it published and when
+commands reached it are known exactly; ``frc_bridge``, ``controller`` and ``planner`` run as
+installed processes on their own ROS domain. The loop's phase is changed while everything
+runs, as it drifts over a match. For each phase:
+
+- goals: the presets in turn, each reached (the controller says so) and then held 2 s on
+  the robot's truth: slowest joint under 0.1 rad/s, swing under 0.5°;
+- mixed readings: ``joint_states`` and ``battery_state`` whose fields are not all those of
+  the one reading the robot published at their stamp;
+- transit: a reading from its sensors' instant to ``joint_states`` heard by another ROS
+  process; a command from the bridge setting it to the robot's NT (the NT value's time);
+- disabled: the robot disabled -> its first reading at 0 V and disabled, and ``arm_state``
+  ``disabled`` heard on ROS;
+- drop: the robot's NT server stopped -> the bridge says it lost the robot; served again
+  -> the bridge says it is back. A "lost" outside these drops (and not within 0.3 s after
+  the robot itself stalled for over 0.1 s) is false.
+
+The reference row applies each command the moment it reaches the robot (as the default
+``sim`` does), the loop still reading and publishing at its instants.
+
+    python bench/bench_frc_loop.py                      # idle and busy, 4 phases
+    python bench/bench_frc_loop.py --loads idle --phases-ms 0 10 --write-docs
+
+Times on this shared machine are noisy; NT's clock and ROS's are both the system clock
+here, which the transit figures rely on. Needs the package built and sourced.
+"""
+
+import argparse
+import os
+from pathlib import Path
+import sys
+import tempfile
+import threading
+import time
+
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE.parent / 'test'), str(HERE.parent), str(HERE)]
+
+from geometry_msgs.msg import PointStamped  # noqa: E402
+import numpy as np  # noqa: E402
+from sensor_msgs.msg import BatteryState, JointState  # noqa: E402
+from std_msgs.msg import String  # noqa: E402
+
+from arm_control import config  # noqa: E402
+from arm_control.frc.conversions import joint_effort_nm  # noqa: E402
+from arm_control.frc.robot_sim import RobotStandIn  # noqa: E402
+from arm_control.frc.settings import load_robot_sim  # noqa: E402
+from arm_control.frc.tables import free_port, now_us  # noqa: E402
+from arm_control.model.dynamics import ArmDynamics  # noqa: E402
+from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED  # noqa: E402
+from arm_control.nodes.realtime import raise_process  # noqa: E402
+
+GOALS = ('mid_score', 'high_score', 'back_score')
+HOLD_S, HOLD_SPEED_RAD_S, HOLD_SWING_RAD = 2.0, 0.1, np.radians(0.5)
+REACH_TIMEOUT_S = 20.0
+PROBE_PRIORITY = 30                 # SCHED_FIFO of the probe's threads (the robot's: 50)
+
+
+class Robot:
+    """The stand-in, run on its own thread, with what it published and what reached it."""
+
+    def __init__(self, port: int):
+        arm, sim = config.load('sim')
+        self.dynamics = ArmDynamics(arm)
+        self.stand_in = RobotStandIn(arm, sim, load_robot_sim(), port)
+        self.published = {}             # time_us -> Reading
+        self.truth = []                 # (t_s, [q, q, qd, qd])
+        self.arrivals = []              # (reached the robot µs, set by the bridge µs)
+        self.stand_in.observer = self.observe
+        import ntcore
+        tables = self.stand_in.tables
+        self.listener = tables.instance.addListener(
+            tables.command, ntcore.EventFlags.kValueRemote,
+            lambda event: self.arrivals.append((now_us(), event.data.value.time())))
+        # As frc_robot_sim runs: its loop and ntcore's threads at real-time priority; this
+        # (main) thread back to normal, so that what it starts is not real-time.
+        self.problem = raise_process(load_robot_sim().realtime_priority)
+        if self.problem:
+            print(self.problem)
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self.stand_in.run, args=(self.stop,))
+        self.thread.start()
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+    def observe(self, reading, truth) -> None:
+        self.published[reading.time_us] = reading
+        self.truth.append((reading.time_us * 1e-6, truth))
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join()
+        self.stand_in.tables.instance.removeListener(self.listener)
+        self.stand_in.close()
+
+
+class Coprocessor:
+    """frc_bridge, controller and planner as processes, and a probe of what they say."""
+
+    def __init__(self, domain: int, port: int, log_dir: Path):
+        from ros_harness import NodeProcess, Probe
+        self.probe = Probe(domain, 'bench_frc_loop')
+        self.nodes = [NodeProcess('frc_bridge', domain, ['-p', f'nt_port:={port}'], log_dir),
+                      NodeProcess('planner', domain, (), log_dir),
+                      NodeProcess('controller', domain, (), log_dir)]
+        node = self.probe.node
+        self.heard = {name: [] for name in ('joint_states', 'battery', 'events', 'states',
+                                            'controller_events', 'diagnostics')}
+        from diagnostic_msgs.msg import DiagnosticArray
+        for name, msg_type, topic, qos in (
+                ('joint_states', JointState, '/joint_states', 50),
+                ('battery', BatteryState, '/battery_state', 50),
+                ('events', String, '/frc_bridge/events', 100),
+                ('states', String, '/arm_state', LATCHED),
+                ('controller_events', String, '/controller/events', 100),
+                ('diagnostics', DiagnosticArray, '/diagnostics', 50)):
+            node.create_subscription(msg_type, topic, self._keep(self.heard[name]), qos)
+        self.goal_pub = node.create_publisher(PointStamped, '/goal_point', COMMANDS)
+
+    @staticmethod
+    def _keep(into):
+        return lambda message: into.append((time.time(), message))
+
+    def said(self, name: str, words: str, since_s: float) -> list:
+        return [t for t, m in self.heard[name] if t >= since_s and words in m.data]
+
+    @property
+    def state(self) -> str:
+        return self.heard['states'][-1][1].data if self.heard['states'] else ''
+
+    def ready(self) -> bool:
+        def sees_planner():
+            seen = [controller_sees_planner(m) for _, m in self.heard['diagnostics']]
+            seen = [s for s in seen if s is not None]
+            return bool(seen and seen[-1]) and self.state in ('waiting', 'holding')
+        return self.probe.spin_until(sees_planner, 60.0)
+
+    def close(self) -> None:
+        for process in self.nodes:
+            process.stop()
+        self.probe.close()
+
+
+def goal(copro, robot, name, x, y) -> dict:
+    since = time.time()
+    message = PointStamped()
+    message.header.frame_id = 'arm_base'
+    message.point.x, message.point.y = float(x), float(y)
+    copro.goal_pub.publish(message)
+    reached = bool(copro.probe.spin_until(
+        lambda: copro.said('controller_events', 'reached', since), REACH_TIMEOUT_S))
+    move_s = (copro.said('controller_events', 'reached', since) or [np.nan])[0] - since
+    copro.probe.spin_for(HOLD_S + 0.1)
+    held = np.array([s for t, s in robot.truth if t > time.time() - HOLD_S])
+    speed = np.max(np.abs(held[:, 2:])) if len(held) else np.inf
+    swing = np.max(np.ptp(held[:, :2], axis=0)) if len(held) else np.inf
+    return {'reached': reached, 'move_s': move_s, 'speed': speed, 'swing': swing,
+            'held': reached and speed < HOLD_SPEED_RAD_S and swing < HOLD_SWING_RAD}
+
+
+def mixed_readings(copro, robot, since_s) -> tuple[int, int, float]:
+    """(messages whose fields are not all those of the loop at their stamp, messages
+    checked, the largest stamp error in ms): each message is matched to the loop nearest
+    its stamp (the loops are a period apart)."""
+    times = np.array(sorted(robot.published))
+    mixed = checked = 0
+    worst_us = 0.0
+    for kind in ('joint_states', 'battery'):
+        for t, message in copro.heard[kind]:
+            if t < since_s or not len(times):
+                continue
+            stamp_us = message.header.stamp.sec * 1e6 + message.header.stamp.nanosec * 1e-3
+            error_us = np.abs(times - stamp_us)
+            worst_us = max(worst_us, np.min(error_us))
+            # A late loop may be followed closely by the next: every loop within 3 ms.
+            candidates = times[error_us <= max(3000.0, np.min(error_us))]
+            checked += 1
+            mixed += not any(whole(message, kind, robot.published[int(t)], robot.dynamics)
+                             for t in candidates)
+    return mixed, checked, 1e-3 * worst_us
+
+
+def whole(message, kind, r, dynamics) -> bool:
+    """Every field of ``message`` is reading ``r``'s."""
+    if kind == 'joint_states':
+        effort = joint_effort_nm(r.motor_current_a, dynamics)
+        return tuple(message.position) == r.position_rad and \
+            tuple(message.velocity) == r.velocity_rad_s and \
+            np.allclose(message.effort, effort, rtol=1e-12, atol=1e-9)
+    return message.voltage == np.float32(r.bus_voltage_v) and \
+        message.current == np.float32(-r.supply_current_a)       # float32 fields
+
+
+def bridge_reading_ages(copro, since_s) -> tuple[float, float]:
+    """From the bridge's own /diagnostics (the robot's sensors' instant to the bridge taking
+    the reading): the median of its per-second p50 (ms), and the share older than 10 ms."""
+    p50, older, total = [], 0, 0
+    for t, message in copro.heard['diagnostics']:
+        for status in message.status if t >= since_s else ():
+            values = {v.key: v.value for v in status.values}
+            if 'reading age p50 (ms, last s)' in values:
+                p50.append(float(values['reading age p50 (ms, last s)']))
+                older += int(values['readings older than 10 ms (last s)'])
+                total += int(values['readings (last s)'])
+    return (np.median(p50) if p50 else np.nan), 100.0 * older / max(total, 1)
+
+
+def disable(copro, robot) -> tuple[float, float]:
+    """(ms to the robot's first reading disabled at 0 V, ms to arm_state disabled)."""
+    since = time.time()
+    robot.stand_in.enabled = False
+    copro.probe.spin_until(lambda: copro.state == 'disabled', 3.0)
+    to_state = next((t for t, m in copro.heard['states'] if t >= since and
+                     m.data == 'disabled'), np.nan) - since
+    first = min((us * 1e-6 for us, r in list(robot.published.items()) if us * 1e-6 >= since
+                 and not r.enabled and r.applied_voltage_v == (0.0, 0.0)), default=np.nan)
+    robot.stand_in.enabled = True
+    copro.probe.spin_until(lambda: copro.state in ('waiting', 'holding'), 5.0)
+    copro.probe.spin_for(1.0)
+    return 1e3 * (first - since), 1e3 * to_state
+
+
+def drop(copro, robot) -> tuple[float, float, tuple]:
+    """(ms to 'lost', ms from serving again to 'back', the drop's window)."""
+    since = time.time()
+    robot.stand_in.tables.stop_serving()
+    copro.probe.spin_until(lambda: copro.said('events', 'lost the robot', since), 2.0)
+    lost = (copro.said('events', 'lost the robot', since) or [np.nan])[0] - since
+    copro.probe.spin_for(1.0)
+    served = time.time()
+    robot.stand_in.tables.serve()
+    copro.probe.spin_until(lambda: copro.said('events', 'robot back', served), 5.0)
+    back = (copro.said('events', 'robot back', served) or [np.nan])[0] - served
+    copro.probe.spin_until(lambda: copro.state in ('waiting', 'holding'), 10.0)
+    copro.probe.spin_for(1.0)
+    return 1e3 * lost, 1e3 * back, (since, time.time())
+
+
+def robot_stalls(robot, since_s) -> list:
+    """(from, to) wall seconds of every gap over 0.1 s between the robot's own loops."""
+    times = np.array(sorted(us * 1e-6 for us in list(robot.published) if us * 1e-6 >= since_s))
+    gaps = np.flatnonzero(np.diff(times) > 0.1)
+    return [(times[i], times[i + 1]) for i in gaps]
+
+
+def percentiles(values_ms) -> str:
+    values_ms = np.asarray(values_ms)
+    if not len(values_ms):
+        return '- / -'
+    return f'{np.median(values_ms):.1f} / {np.percentile(values_ms, 99):.1f}'
+
+
+def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
+    """One row: at ``phase_ms``, or (``reference``) with commands applied on arrival."""
+    robot.stand_in.phase_s = phase_ms * 1e-3
+    robot.stand_in.apply_on_arrival(reference)
+    copro.probe.spin_for(1.0)
+    since = time.time()
+    arrivals_from = len(robot.arrivals)
+    moves = [goal(copro, robot, name, *presets[name]) for name in GOALS]
+    mixed, checked, stamp_error_ms = mixed_readings(copro, robot, since)
+    bridge_p50, bridge_over = bridge_reading_ages(copro, since)
+    transit_in = [1e3 * (t - (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec))
+                  for t, m in copro.heard['joint_states'] if t >= since]
+    transit_out = [1e-3 * (arrived - sent) for arrived, sent in robot.arrivals[arrivals_from:]]
+    to_zero_ms, to_disabled_ms = disable(copro, robot)
+    lost_ms, back_ms, window = drop(copro, robot)
+    stalls = robot_stalls(robot, since)
+    false_lost = [(t, m.data) for t, m in copro.heard['events'] if t >= since and
+                  'lost the robot' in m.data and not window[0] <= t <= window[1] and
+                  not any(a <= t <= b + 0.3 for a, b in stalls)]
+    for t, said in false_lost:
+        print(f'false lost at {t - since:.2f} s: {said}', file=sys.stderr)
+    false_lost = len(false_lost)
+    held = sum(m['held'] for m in moves)
+    robot.stand_in.apply_on_arrival(False)
+    phase = 'on arrival (reference)' if reference else f'{phase_ms:g}'
+    return (f'| {load} | {phase} | {held}/{len(moves)} | '
+            f"{max(m['move_s'] for m in moves):.2f} | {max(m['speed'] for m in moves):.3f} | "
+            f"{np.degrees(max(m['swing'] for m in moves)):.2f} | {mixed}/{checked} | "
+            f'{stamp_error_ms:.2f} | {bridge_p50:.1f} / {bridge_over:.1f} | '
+            f'{percentiles(transit_in)} | {percentiles(transit_out)} | {to_zero_ms:.0f} | '
+            f'{to_disabled_ms:.0f} | {lost_ms:.0f} | {back_ms:.0f} | {false_lost} | '
+            f'{len(stalls)} |')
+
+
+HEADER = ('| load | phase ms | goals reached & held | slowest move s | hold: fastest joint '
+          'rad/s | hold: swing deg | mixed readings | stamp error ms | reading → bridge '
+          'p50 ms / % over 10 ms | reading → joint_states heard p50 / p99 ms | '
+          'command → robot p50 / p99 ms | disabled → 0 V ms | disabled → arm_state ms | '
+          'drop → lost ms | served → back ms | false lost | robot stalls > 0.1 s |\n'
+          '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+
+
+def set_priority(priority: int) -> None:
+    """This thread at SCHED_FIFO ``priority``, or normal scheduling for 0 (what it starts
+    inherits it)."""
+    os.sched_setscheduler(0, os.SCHED_FIFO if priority else os.SCHED_OTHER,
+                          os.sched_param(priority))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--phases-ms', type=float, nargs='+', default=[0.0, 5.0, 10.0, 15.0])
+    parser.add_argument('--loads', nargs='+', default=['idle', 'busy'],
+                        choices=['idle', 'busy'])
+    parser.add_argument('--no-reference', dest='reference', action='store_false',
+                        help='leave out the row with commands applied on arrival')
+    parser.add_argument('--write-docs', action='store_true')
+    args = parser.parse_args()
+    import busy
+    from ros_harness import ros_domain
+    presets = {name: (x, y) for name, x, y in config.load('sim')[0].presets}
+    rows = []
+    port = free_port()
+    with ros_domain() as domain, tempfile.TemporaryDirectory() as log_dir:
+        robot = Robot(port)
+        copro = Coprocessor(domain, port, Path(log_dir))
+        # The probe's spinning (this thread) a little below the robot's loop but real-time,
+        # as the controller's executor: at normal priority, preempted while holding Python's
+        # lock, it would stall the robot's loop in this process. Its DDS threads, the nodes'
+        # processes and the busy loops are started at normal priority.
+        probe_rt = not robot.problem
+        set_priority(PROBE_PRIORITY if probe_rt else 0)
+        try:
+            if not copro.ready():
+                raise SystemExit('the controller never became ready:\n' +
+                                 copro.nodes[2].output()[-3000:])
+            for load in args.loads:
+                set_priority(0)                 # the busy loops at normal priority
+                loops = busy.start(2, 900.0) if load == 'busy' else []
+                set_priority(PROBE_PRIORITY if probe_rt else 0)
+                if any(os.sched_getscheduler(p.pid) != os.SCHED_OTHER for p in loops):
+                    busy.stop(loops)
+                    raise SystemExit('the busy loops are not at normal priority')
+                try:
+                    runs = [(0.0, True)] * args.reference + \
+                        [(phase_ms, False) for phase_ms in args.phases_ms]
+                    for phase_ms, reference in runs:
+                        rows.append(run_phase(copro, robot, phase_ms, presets, load, reference))
+                        print(rows[-1], flush=True)
+                finally:
+                    busy.stop(loops)
+        finally:
+            copro.close()
+            robot.close()
+    table = HEADER + '\n' + '\n'.join(rows)
+    print('\n' + table)
+    if args.write_docs:
+        import docs_table
+        command = 'python bench/bench_frc_loop.py ' + ' '.join(sys.argv[1:])
+        print(docs_table.write('frc_loop', "The arm on a robot's clock over NT4", command,
+                               table))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,210 @@
+"""The arm on the robot's clock: commands applied on arrival against the robot's loop at
+phases spread over its period (issue 38).
+
+Each row is one way of running: the reference row applies each command the instant it
+arrives (the sim's ``command_timing: on_arrival``); the others read the sensors and apply the
+latest command only at the robot loop's instants, at ``robot_loop_phase_s`` past each whole
+period of the clock. Per row:
+
+- the hold at (0.0, 1.75), the issue's, and at the start (1.5708, −1.5708): over 2 s, the
+  fastest joint speed (rad/s) and the largest swing (deg) on the true state (bars: 0.1 rad/s,
+  0.5 deg);
+- the moves of the suite (``bench_trajectory.SUITE``): each move's time from its goal until
+  it came within 1° of where it came to rest and stayed (``bench_ros.settled_s``), over the
+  minimum under the electrical limits (``minimum_time.suite_minimums``): worst and median
+  (bars: 1.10x idle, 1.25x with two busy processes), and the lowest point of either link
+  over all moves (mm; below 0 is in the floor).
+
+In one process (default), deterministic: ``RobotLoop`` (the core and the plant on 1 ms steps;
+the controller ticks at whole periods and its command arrives 4 ms later; the planner plans
+in the core's step). Through ROS (``--ros``): the three nodes as ``bench_ros`` starts them,
+the sim's ``command_timing`` and ``robot_loop_phase_s`` set per row (the controller ticks at
+a phase of its own, so the phase between the two varies from run to run).
+
+    python bench/robot_clock.py                       # in one process: every mode, phase
+    python bench/robot_clock.py --ros [--load]        # through ROS (minutes)
+    python bench/robot_clock.py --phases 0,10 --moves 0,4
+    python bench/robot_clock.py --write-docs          # keep the table in docs/benchmarks
+"""
+
+import argparse
+import dataclasses
+import math
+from pathlib import Path
+import statistics
+import sys
+
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE.parent / 'test'), str(HERE), str(HERE.parent)]
+
+from bench_trajectory import SUITE  # noqa: E402
+import docs_table  # noqa: E402
+import minimum_time  # noqa: E402
+import numpy as np  # noqa: E402
+
+from arm_control import config  # noqa: E402
+from arm_control.control.robot_loop import RobotLoop  # noqa: E402
+from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
+from arm_control.model.world import ForbiddenSpace  # noqa: E402
+from arm_control.planning.planner import Planner  # noqa: E402
+
+HOLDS = ((0.0, 1.75), (1.5708, -1.5708))
+HOLD_S, HOLD_AFTER_S = 2.0, 1.0          # measured over 2 s after 1 s held
+PHASES_MS = (0, 5, 10, 15, 19)
+SETTLED_RAD = math.radians(1.0)
+REST_FOR_S = 0.3
+MOVE_TIMEOUT_S = 6.0
+
+
+@dataclasses.dataclass
+class Row:
+    label: str
+    timing: str                      # the sim's command_timing
+    phase_ms: float
+    mode: str                        # the controller's command_mode (or the rig's mode)
+    hold_speed: float = math.nan
+    hold_swing_deg: float = math.nan
+    ratios: list = dataclasses.field(default_factory=list)
+    lowest_mm: float = math.inf
+    failed: list = dataclasses.field(default_factory=list)
+
+
+def settled_s(times, q, start_s: float) -> float:
+    """From ``start_s`` until within SETTLED_RAD of the rest it came to (its mean over the
+    last REST_FOR_S), for good; NaN when it never came to rest."""
+    times, q = np.asarray(times), np.asarray(q)
+    last = times >= times[-1] - REST_FOR_S
+    rest = q[last].mean(axis=0)
+    if np.max(np.ptp(q[last], axis=0)) > SETTLED_RAD:
+        return math.nan
+    outside = np.flatnonzero(np.any(np.abs(q - rest) > SETTLED_RAD, axis=1))
+    return max(float(times[outside[-1] + 1] if len(outside) else times[0]) - start_s, 0.0)
+
+
+def start_configuration(arm, start_xy):
+    """The suite's start: the first free elbow branch (``bench_trajectory``), to 0.01 rad."""
+    kinematics, forbidden = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m), \
+        ForbiddenSpace(arm)
+    for q in reversed(kinematics.inverse(*start_xy)):
+        q = np.array([forbidden.to_joint_range(q[k], k) or q[k] for k in range(2)])
+        if forbidden.is_free(q):
+            return np.round(q, 2)
+    raise ValueError(f'the start {start_xy} is forbidden on both branches')
+
+
+def phase_s(row) -> float:
+    return row.phase_ms / 1000.0 if math.isfinite(row.phase_ms) else 0.0
+
+
+def hold_in_process(arm, controller_config, row, q):
+    loop = RobotLoop(arm, controller_config, start=q, mode=row.mode, seed=1,
+                     phase_s=phase_s(row), robot_loop=row.timing == 'robot_loop')
+    loop.run(HOLD_AFTER_S + HOLD_S)
+    states = np.array([s for t, s in loop.history if t > HOLD_AFTER_S])
+    return float(np.max(np.abs(states[:, 2:]))), float(np.degrees(np.max(np.ptp(
+        states[:, :2], axis=0))))
+
+
+def move_in_process(arm, controller_config, planner, row, start_q, goal_xy, seed):
+    loop = RobotLoop(arm, controller_config, planner, start=start_q, mode=row.mode, seed=seed,
+                     phase_s=phase_s(row), robot_loop=row.timing == 'robot_loop')
+    loop.run(0.5)
+    goal_s = loop.now_s
+    loop.core.submit_goal(goal_s, *goal_xy)
+    loop.run(MOVE_TIMEOUT_S)
+    times = np.array([t for t, _ in loop.history])
+    q = np.array([s[:2] for _, s in loop.history])
+    after = times >= goal_s
+    return settled_s(times[after], q[after], goal_s), 1000.0 * loop.lowest_m
+
+
+def rows_for(phases_ms, modes) -> list[Row]:
+    rows = [Row('on arrival (reference)', 'on_arrival', math.nan, 'volts')]
+    for mode in modes:
+        rows += [Row(f'robot loop, {mode}', 'robot_loop', p, mode) for p in phases_ms]
+    return rows
+
+
+def run_in_process(args, rows, moves):
+    arm, controller_config = config.load('controller')
+    planner = Planner(arm, config.load('planner')[1])
+    minimums = minimum_time.suite_minimums(arm, controller_config, moves, minimum_time.CACHE)
+    for row in rows:
+        speeds, swings = zip(*(hold_in_process(arm, controller_config, row, q) for q in HOLDS))
+        row.hold_speed, row.hold_swing_deg = max(speeds), max(swings)
+        for k, (name, start_q, goal_xy) in enumerate(moves):
+            move_s, lowest = move_in_process(arm, controller_config, planner, row, start_q,
+                                             goal_xy, k)
+            row.ratios.append(move_s / minimums[name]['min_s'])
+            row.lowest_mm = min(row.lowest_mm, lowest)
+            if not math.isfinite(move_s):
+                row.failed.append(name)
+        print(f'  {row.label} {fmt(row.phase_ms, ".0f")} ms: {summary(row)}', file=sys.stderr,
+              flush=True)
+
+
+def fmt(value, spec='.2f') -> str:
+    return '-' if value is None or not math.isfinite(value) else format(value, spec)
+
+
+def summary(row) -> str:
+    finite = [r for r in row.ratios if math.isfinite(r)]
+    return (f'hold {row.hold_speed:.3f} rad/s, {row.hold_swing_deg:.2f} deg; moves worst '
+            f'{fmt(max(finite, default=math.nan))}, median '
+            f'{fmt(statistics.median(finite) if finite else math.nan)}')
+
+
+def table(rows, bar: float) -> str:
+    lines = ['| sim | phase ms | controller sends | hold: fastest joint rad/s | '
+             'hold: swing deg | moves / minimum: worst | median | within '
+             f'{bar:.2f}x | lowest mm |', '|---|---|---|---|---|---|---|---|---|']
+    for row in rows:
+        finite = [r for r in row.ratios if math.isfinite(r)]
+        within = sum(r <= bar for r in finite)
+        lines.append(
+            f'| {row.timing} | {fmt(row.phase_ms, ".0f")} | {row.mode} | '
+            f'{row.hold_speed:.3f} | {row.hold_swing_deg:.2f} | '
+            f'{fmt(max(finite, default=math.nan))} | '
+            f'{fmt(statistics.median(finite) if finite else math.nan)} | '
+            f'{within} of {len(row.ratios)} | {row.lowest_mm:.0f} |')
+    return '\n'.join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--ros', action='store_true', help='through ROS, not in one process')
+    parser.add_argument('--load', action='store_true', help='(--ros) two busy loops beside')
+    parser.add_argument('--phases', type=lambda text: [float(p) for p in text.split(',')],
+                        default=list(PHASES_MS), help='robot loop phases (ms), e.g. 0,10')
+    parser.add_argument('--modes', type=lambda text: text.split(','),
+                        default=['volts', 'profile'],
+                        help='what the controller sends on the robot loop: volts, profile '
+                             '(in one process also volts_at_instant)')
+    parser.add_argument('--moves', type=lambda text: [int(i) for i in text.split(',')],
+                        help='indices into the suite, e.g. 4,5')
+    parser.add_argument('--repeats', type=int, default=1, help='(--ros) runs of each move')
+    parser.add_argument('--domain', type=int, help='(--ros) a ROS domain reserved for you')
+    parser.add_argument('--write-docs', action='store_true',
+                        help='keep the table in docs/benchmarks/robot_clock[_ros].md')
+    args = parser.parse_args()
+    arm = config.load('controller')[0]
+    suite = [SUITE[i] for i in args.moves] if args.moves else SUITE
+    moves = [(name, start_configuration(arm, start), goal) for name, start, goal in suite]
+    rows = rows_for(args.phases, args.modes)
+    if args.ros:
+        import robot_clock_ros                      # ROS only when asked for
+        where = robot_clock_ros.run(args, rows, suite)
+    else:
+        run_in_process(args, rows, moves)
+        where = 'in one process (RobotLoop: deterministic, 1 ms physics, commands 4 ms late)'
+    bar = 1.25 if args.load else 1.10
+    text = f'{where}; {len(moves)} moves of the suite.\n\n{table(rows, bar)}\n'
+    print('\n' + text)
+    if args.write_docs:
+        name = 'robot_clock_ros' + ('_load' if args.load else '') if args.ros else 'robot_clock'
+        command = 'python bench/robot_clock.py ' + ' '.join(sys.argv[1:])
+        print(docs_table.write(name, "The arm on the robot's clock", command, text))
+
+
+if __name__ == '__main__':
+    main()

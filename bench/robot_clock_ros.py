@@ -1,0 +1,72 @@
+"""``robot_clock.py --ros``: its rows through ROS, the three nodes started afresh per row.
+
+Per row the sim runs with the row's ``command_timing`` and ``robot_loop_phase_s`` and the
+controller with its ``command_mode`` (``bench_ros.nodes``, two busy loops beside them under
+``--load``). The holds: the arm taken by a goal to each of ``robot_clock.HOLDS``, then 2 s of
+``/sim/ground_truth``. The moves: ``bench_ros.RosMoves`` (to the start by a goal, at rest,
+then the goal; timed on the true state). The minimum is the suite's from its nominal start
+(``minimum_time`` cache): the starts through ROS lie within a degree of it.
+"""
+
+import math
+import sys
+
+from bench_ros import lowest_mm, nodes, RosMoves
+import minimum_time
+import numpy as np
+import robot_clock
+
+from arm_control import config
+from arm_control.model.kinematics import TwoLinkKinematics
+
+HOLD_SETTLE_S = 1.0
+
+
+def node_args(row) -> dict:
+    sim = ['-p', f'command_timing:={row.timing}']
+    if math.isfinite(row.phase_ms):
+        sim += ['-p', f'robot_loop_phase_s:={row.phase_ms / 1000.0:g}']
+    return {'sim': tuple(sim), 'controller': ('-p', f'command_mode:={row.mode}')}
+
+
+def hold(rig, ros, q):
+    """(fastest joint rad/s, swing deg) over 2 s held at ``q``, taken there by a goal."""
+    arm = config.load('sim')[0]
+    kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
+    if ros.go_to(kinematics.forward(q)) is None:
+        return math.nan, math.nan
+    rig.spin_for(HOLD_SETTLE_S)
+    since = rig.truth[-1][0]
+    rig.spin_for(robot_clock.HOLD_S)
+    held = [m for t, m in rig.truth if t > since]
+    return float(np.max(np.abs([m.velocity for m in held]))), \
+        float(np.degrees(np.max(np.ptp([m.position for m in held], axis=0))))
+
+
+def run(args, rows, suite) -> str:
+    arm, controller_config = config.load('controller')
+    moves = [(name, robot_clock.start_configuration(arm, start), goal)
+             for name, start, goal in suite]
+    minimums = minimum_time.suite_minimums(arm, controller_config, moves, minimum_time.CACHE)
+    for row in rows:
+        with nodes('robot_clock', node_args(row), args.load, args.domain) as rig:
+            rig.start_all()
+            rig.ready(90.0)
+            ros = RosMoves(rig, False)
+            speeds, swings = zip(*(hold(rig, ros, q) for q in robot_clock.HOLDS))
+            row.hold_speed, row.hold_swing_deg = max(speeds), max(swings)
+            for name, start_xy, goal_xy in suite:
+                for _ in range(args.repeats):
+                    result = ros.move(goal_xy) if ros.go_to(start_xy) is not None else None
+                    if result is None or not math.isfinite(result['ros_s']):
+                        row.failed.append(name)
+                        row.ratios.append(math.nan)
+                        continue
+                    row.ratios.append(result['ros_s'] / minimums[name]['min_s'])
+                    if len(result['q']):
+                        row.lowest_mm = min(row.lowest_mm, lowest_mm(arm, result['q']))
+        print(f'  {row.label} {robot_clock.fmt(row.phase_ms, ".0f")} ms: '
+              f'{robot_clock.summary(row)}', file=sys.stderr, flush=True)
+    return (f'through ROS ({"two busy loops beside" if args.load else "idle"}, a shared '
+            f'machine; {args.repeats} run(s) a move; the minimum from each move' + "'s "
+            'nominal start)')
