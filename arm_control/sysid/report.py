@@ -189,6 +189,18 @@ class Identification:
     plot_file: Path
 
 
+def said(result: Identification) -> str:
+    """The fit in one line for the node's log."""
+    fit = result.fit
+    line = (f'fitted {fit.samples} samples; residual RMS shoulder {fit.residual_rms_v[0]:.3f} V'
+            f', elbow {fit.residual_rms_v[1]:.3f} V; command lag {1000 * fit.lag_s:+.1f} ms; '
+            f'report {result.report_file}, plot {result.plot_file}')
+    if not fit.instrumented:
+        line += ('; the log holds no plan (/sysid/reference): fitted by least squares, whose '
+                 'inertias the sensor noise pulls low in closed loop')
+    return line
+
+
 def identify(log: Log, nominal: ArmConfig, settings: SysIdConfig, directory, source: str,
              notes=()) -> Identification:
     """Fit ``log``, then write identified_params.yaml, report.md and fit.png to ``directory``.

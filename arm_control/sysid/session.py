@@ -12,10 +12,13 @@ track where it matters most. If the stage-1 fit fails, stage 2 uses the robot fi
 the arm is held at the centre) and the in-process run (``simulated``).
 """
 
+from dataclasses import replace
+
 from arm_control.config import ArmConfig
 from arm_control.sysid.excitation import (design_excitation, DYNAMIC, ExcitationRun,
                                           MULTISINE, QUASISTATIC)
 from arm_control.sysid.fit import fit_log
+from arm_control.sysid.handover import holding, lowering
 from arm_control.sysid.log import Log
 from arm_control.sysid.regressor import RealisationError, realise, with_values
 from arm_control.sysid.settings import SysIdConfig
@@ -90,3 +93,16 @@ class Session:
         if self.run.stopped is not None:
             return self.run.finished(now_s)
         return self.stage == 2 and self.run.finished(now_s)
+
+    def hold(self, model: ArmConfig, q) -> None:
+        """From now on hold the arm at ``q`` with ``model`` (after the excitation)."""
+        self.run = ExcitationRun(model, self.settings, holding(q))
+        self.stage = 3
+
+    def lower(self, model: ArmConfig, q, rest) -> None:
+        """From now on lower the arm from ``q`` onto ``rest`` with ``model``; ValueError when
+        the way is not free. Forbidden space is watched without a margin: a rest may be
+        near it."""
+        self.run = ExcitationRun(model, replace(self.settings, margin_rad=0.0),
+                                 lowering(model, q, rest))
+        self.stage = 3

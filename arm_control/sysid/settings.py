@@ -11,6 +11,10 @@ class SysIdConfig:
     """How the excitation moves the arm, how it is tracked, and how the log is fitted."""
 
     loop_rate_hz: float
+    realtime_priority: int
+    hand_over_timeout_s: float
+    rest_rad: tuple[float, float]
+    max_stall_s: float
     output_directory: str
     fit_only_bag: str
     centre_rad: tuple[float, float]
@@ -63,6 +67,10 @@ class SysIdConfig:
             raise ParameterError("parameter 'output_directory' is empty: expected a directory")
         return cls(
             loop_rate_hz=read.number('loop_rate_hz', low=0.0, high=1000.0, low_open=True),
+            realtime_priority=read.integer('realtime_priority', low=0, high=98),
+            hand_over_timeout_s=read.nonnegative('hand_over_timeout_s'),
+            rest_rad=read.numbers('rest_rad', 2),
+            max_stall_s=read.nonnegative('max_stall_s'),
             output_directory=output_directory,
             fit_only_bag=text('fit_only_bag'),
             centre_rad=read.numbers('centre_rad', 2),
