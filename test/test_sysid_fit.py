@@ -133,3 +133,20 @@ def test_the_identification_run_is_safe_and_short(noisy_run, demo, settings):
         assert np.max(np.abs(current)) <= settings.max_current_a + 1.0   # noisy velocity
     assert noisy_run.arm_time_s < 60.0
     assert noisy_run.session.stopped is None
+
+
+def test_stalls_of_the_command_stream_are_ridden_through_within_the_current_cap(demo, arm,
+                                                                                  settings):
+    """The node starved of CPU for 0.45 s three times (in the multi-sine, the shoulder's steps
+    and the elbow's): the robot gets the last command, then 0 V. The excitation rejoins the
+    plan each time instead of stopping, never enters forbidden space, keeps every motor
+    under max_current_a, and the fit (which leaves the stalls out) still finds the arm."""
+    stalls = ((12.0, 0.45), (27.5, 0.45), (39.0, 0.45))
+    run = identification_run(demo, arm, settings, seed=2, stalls=stalls)
+    assert run.session.stopped is None and len(run.session.stalls) == 3
+    assert np.all(ForbiddenSpace(demo).is_free(run.true_state[:, :2]))
+    assert np.all(run.peak_current_a <= settings.max_current_a)
+    assert run.arm_time_s < 60.0
+    result = fit(run, arm, settings)
+    z = (result.parameters - base_parameters(demo)) / result.standard_errors
+    assert np.all(np.abs(z) < 3.0), dict(zip(BASE_NAMES, np.round(z, 2)))

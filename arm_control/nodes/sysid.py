@@ -84,7 +84,7 @@ class SysIdNode(Node):
         self.unsafe_start = None            # why the start cannot be excited from, when not
         self.first_joint_s = self.writer = self.session = self.label = self.work = None
         self.voltage_pub = self.hold_model = None
-        self.last_command_s = -math.inf
+        self.last_command_s = self.commanded_stamp_s = -math.inf
         self.samples = Samples()            # for stage 1's fit
         self.workers = ThreadPoolExecutor(max_workers=1, initializer=_normal_priority)
         if self.settings.fit_only_bag:
@@ -126,13 +126,16 @@ class SysIdNode(Node):
         self.joint_sample = (now, np.array(position[:2], float), np.array(velocity[:2], float))
         if self.first_joint_s is None:
             self.first_joint_s = now
+        stamp = _stamp_s(msg) or now
         if self.writer is not None and self.phase != 'waiting':
-            stamp = _stamp_s(msg) or now
             self.writer.joint_state(stamp, msg)
             self.samples.joint(stamp, *self.joint_sample[1:])
-        # One command per joint state, so that each is computed from the freshest reading.
+        # One command per joint state, so that each is computed from the freshest reading;
+        # at most two a period of the sensor's time (a backlog after a stall is worked through
+        # to its newest reading, not left at its oldest).
         if self.phase in COMMANDING and self.voltage_pub is not None and \
-                now - self.last_command_s >= 0.5 * self.period_s:
+                stamp - self.commanded_stamp_s >= 0.5 * self.period_s:
+            self.commanded_stamp_s = stamp
             self.drive(now)
 
     def _velocity_from(self, position, now):
@@ -217,7 +220,11 @@ class SysIdNode(Node):
         if self.phase == 'driving' and session.stopped is None and \
                 self.count_publishers('voltage_command') > 1:
             session.run.stop(now, position, 'another node began publishing voltage_command')
+        stalls = len(session.stalls)
         voltage = session.command(now, position, velocity)
+        if len(session.stalls) > stalls:
+            self.get_logger().warning(f'no command for {session.stalls[-1][1]:.2f} s (this '
+                                      'process was starved): rejoining the excitation')
         self.publish(voltage, now)
         if self.phase == 'lowering' and session.run.finished(now):
             self.finish(f'lowered onto the rest at {degrees(self.settings.rest_rad)}: 0 V')
@@ -232,13 +239,12 @@ class SysIdNode(Node):
             self.writer.close()
             self.writer = None
             if session.stopped is not None:
-                self.hold(f'excitation stopped: {session.stopped}; the log is in '
-                          f'{self.directory / LOG_NAME}, nothing was fitted', self.arm)
-                return
+                self.get_logger().error(f'excitation stopped: {session.stopped}; fitting '
+                                        'what it logged')
             self.get_logger().info(
                 f'excitation done in {session.elapsed_s(now):.1f} s of arm time '
-                f'({session.run.current_clamped} commands held to max_current_a in stage 2); '
-                'fitting while holding the arm')
+                f'({session.run.current_clamped} commands held to max_current_a in stage 2, '
+                f'{len(session.stalls)} stalls ridden through); fitting while holding the arm')
             self.phase = 'fitting'
             self.work = self.workers.submit(self.identify, self.directory / LOG_NAME)
 

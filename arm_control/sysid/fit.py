@@ -72,7 +72,9 @@ def _filter(samples, weights):
 def applied_voltage(log: Log, start_s, end_s, lag_s: float):
     """The mean voltage over [start_s, end_s] (arrays): commands held (zero-order) from
     ``lag_s`` after they were sent, clipped to the battery voltage where it was logged;
-    ``inside`` is False before the first command and after the last one's period."""
+    ``inside`` is False before the first command, after the last one's period, and over a
+    gap in the commands (one held more than ``GAP_PERIODS`` periods: the node stalled, and
+    the robot timed out to 0 V meanwhile, which the log does not hold)."""
     edges = log.command_time_s + lag_s
     volts = log.voltage_v
     held = np.diff(edges)
@@ -84,7 +86,11 @@ def applied_voltage(log: Log, start_s, end_s, lag_s: float):
 
     mean = (area(end_s) - area(start_s)) / (end_s - start_s)[:, None]
     last_hold = float(np.median(held)) if len(held) else 0.0
-    inside = (start_s >= edges[0]) & (end_s <= edges[-1] + last_hold)
+    stalled = np.concatenate([[0], np.cumsum(np.append(held > GAP_PERIODS * last_hold, False))])
+    first = np.clip(np.searchsorted(edges, start_s, side='right') - 1, 0, len(edges) - 1)
+    last = np.clip(np.searchsorted(edges, end_s, side='left') - 1, 0, len(edges) - 1)
+    inside = ((start_s >= edges[0]) & (end_s <= edges[-1] + last_hold)
+              & (stalled[last + 1] == stalled[first]))
     if len(log.battery_v):
         bus = np.interp((start_s + end_s) / 2.0, log.battery_time_s, log.battery_v)
         mean = np.clip(mean, -bus[:, None], bus[:, None])

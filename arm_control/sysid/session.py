@@ -86,8 +86,17 @@ class Session:
             self.stage = 2
             return
         self.notes += notes
-        self.run = ExcitationRun(model, self.settings, excitation)
+        self._take(ExcitationRun(model, self.settings, excitation))
         self.stage = 2
+
+    def _take(self, run: ExcitationRun) -> None:
+        """Drive ``run`` from now on, keeping the list of stalls ridden through."""
+        run.stalls = self.run.stalls
+        self.run = run
+
+    @property
+    def stalls(self) -> list:
+        return self.run.stalls
 
     def finished(self, now_s) -> bool:
         if self.run.stopped is not None:
@@ -96,13 +105,13 @@ class Session:
 
     def hold(self, model: ArmConfig, q) -> None:
         """From now on hold the arm at ``q`` with ``model`` (after the excitation)."""
-        self.run = ExcitationRun(model, self.settings, holding(q))
+        self._take(ExcitationRun(model, self.settings, holding(q)))
         self.stage = 3
 
     def lower(self, model: ArmConfig, q, rest) -> None:
         """From now on lower the arm from ``q`` onto ``rest`` with ``model``; ValueError when
         the way is not free. Forbidden space is watched without a margin: a rest may be
         near it."""
-        self.run = ExcitationRun(model, replace(self.settings, margin_rad=0.0),
-                                 lowering(model, q, rest))
+        self._take(ExcitationRun(model, replace(self.settings, margin_rad=0.0),
+                                 lowering(model, q, rest)))
         self.stage = 3
