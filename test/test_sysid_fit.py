@@ -135,8 +135,8 @@ def test_the_identification_run_is_safe_and_short(noisy_run, demo, settings):
     assert noisy_run.session.stopped is None
 
 
-def test_stalls_of_the_command_stream_are_ridden_through_within_the_current_cap(demo, arm,
-                                                                                  settings):
+def test_stalls_of_the_command_stream_are_ridden_through_within_the_current_cap(
+        demo, arm, settings):
     """The node starved of CPU for 0.45 s three times (in the multi-sine, the shoulder's steps
     and the elbow's): the robot gets the last command, then 0 V. The excitation rejoins the
     plan each time instead of stopping, never enters forbidden space, keeps every motor

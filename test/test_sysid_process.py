@@ -41,8 +41,8 @@ def truth_since(truth, since_s):
     return np.array([m.position for t, m in truth if t >= since_s]).reshape(-1, 2)
 
 
-def test_sysid_identifies_the_demo_arm_hands_it_over_and_fits_its_log_again(launch, probe,
-                                                                             tmp_path):
+def test_sysid_identifies_the_demo_arm_hands_it_over_and_fits_its_log_again(
+        launch, probe, tmp_path):
     launch('sim', '--params-file', share('arm.yaml'), '--params-file',
            share('sysid_demo_arm.yaml'))
     commands = probe.collect(Float64MultiArray, '/voltage_command')
