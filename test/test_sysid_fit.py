@@ -13,6 +13,7 @@ from arm_control.model.plant import ArmPlant
 from arm_control.model.world import ForbiddenSpace
 from arm_control.sysid.excitation import per_motor_current_a
 from arm_control.sysid.fit import fit_log, hac_covariance, weighted_least_squares
+from arm_control.sysid.quality import assess, identified_values
 from arm_control.sysid.regressor import BASE_NAMES, base_parameters, regressor
 from arm_control.sysid.settings import SysIdConfig
 from arm_control.sysid.simulated import identification_run
@@ -150,3 +151,25 @@ def test_stalls_of_the_command_stream_are_ridden_through_within_the_current_cap(
     result = fit(run, arm, settings)
     z = (result.parameters - base_parameters(demo)) / result.standard_errors
     assert np.all(np.abs(z) < 3.0), dict(zip(BASE_NAMES, np.round(z, 2)))
+
+
+def test_a_joint_that_never_moves_identifies_nothing_of_its_own(demo, arm, settings):
+    """Only the elbow excited, the shoulder held: the shoulder's inertia, moment and
+    friction are never seen (σ = ∞), are reported with that reason and are not written;
+    the elbow's are found."""
+    still = dataclasses.replace(settings, quasistatic_range_rad=(0.0, 1.0),
+                                multisine_amplitude_rad=(0.0, 0.9), dynamic_step_rad=(0.0, 0.7))
+    result = fit(identification_run(demo, arm, still, seed=3), arm, settings)
+    quality = assess(result, arm)
+    shoulder = [BASE_NAMES.index(n) for n in ('shoulder_inertia', 'shoulder_moment',
+                                              'shoulder_viscous', 'shoulder_coulomb')]
+    assert np.all(np.isinf(result.standard_errors[shoulder]))
+    assert set(quality.unidentified) == {BASE_NAMES[k] for k in shoulder}
+    assert all(quality.reasons[k] is not None for k in shoulder)
+    values, _ = identified_values(result, arm)
+    assert set(values.values) == {'elbow.viscous_friction_nm_s_per_rad',
+                                  'elbow.coulomb_friction_nm'}
+    elbow = [BASE_NAMES.index(n) for n in ('elbow_inertia', 'elbow_moment', 'elbow_viscous',
+                                           'elbow_coulomb')]
+    z = (result.parameters - base_parameters(demo))[elbow] / result.standard_errors[elbow]
+    assert np.all(np.abs(z) < 3.0)

@@ -20,7 +20,8 @@ from arm_control.sysid.excitation import (design_excitation, DYNAMIC, Excitation
 from arm_control.sysid.fit import fit_log
 from arm_control.sysid.handover import holding, lowering
 from arm_control.sysid.log import Log
-from arm_control.sysid.regressor import RealisationError, realise, with_values
+from arm_control.sysid.quality import identified_values
+from arm_control.sysid.regressor import RealisationError, with_values
 from arm_control.sysid.settings import SysIdConfig
 
 
@@ -29,7 +30,7 @@ def provisional_model(log: Log, nominal: ArmConfig, settings: SysIdConfig):
     try:
         fit = fit_log(log, nominal, settings.smoothing_window_s, settings.max_command_lag_s,
                       settings.min_speed_rad_s)
-        return with_values(nominal, realise(fit.parameters, nominal).values), \
+        return with_values(nominal, identified_values(fit, nominal)[0].values), \
             'stage 2 designed and tracked with the stage-1 fit'
     except (ValueError, RealisationError) as error:
         return nominal, f'stage 2 designed and tracked with the robot file: stage 1 gave {error}'
