@@ -10,6 +10,7 @@ point of either link over the whole run (negative: in the floor) and how far the
 from the hold once the controller took it.
 
     python bench/bench_sysid_busy.py --runs 5 --domain 224 [--busy 2] [--write-docs]
+        [--arm bench/arms/heavy_offset.yaml] [--keep /tmp/runs]
 """
 
 import argparse
@@ -42,7 +43,7 @@ def share(name):
     return str(install_prefix() / 'share' / 'arm_control' / 'config' / name)
 
 
-def one_run(domain, seed, directory, forbidden):
+def one_run(domain, seed, directory, forbidden, arm_file):
     probe = Probe(domain, f'bench_sysid_busy_{seed}')
     truth, currents = [], []
     probe.node.create_subscription(JointState, '/sim/ground_truth',
@@ -50,7 +51,7 @@ def one_run(domain, seed, directory, forbidden):
     probe.node.create_subscription(Float64MultiArray, '/motor_currents',
                                    lambda m: currents.append((time.monotonic(), m)), 100)
     processes = [NodeProcess('sim', domain, ('--params-file', share('arm.yaml'),
-                                             '--params-file', share('sysid_demo_arm.yaml'),
+                                             '--params-file', arm_file,
                                              '-p', f'random_seed:={seed}'), directory)]
     sysid = NodeProcess('sysid', domain, ('-p', f'output_directory:={directory}'), directory)
     processes.append(sysid)
@@ -96,6 +97,9 @@ def main():
     parser.add_argument('--runs', type=int, default=5)
     parser.add_argument('--busy', type=int, default=2)
     parser.add_argument('--domain', type=int, required=True)
+    parser.add_argument('--arm', default=share('sysid_demo_arm.yaml'),
+                        help='the true arm: a parameter file layered over arm.yaml for the sim')
+    parser.add_argument('--keep', default='', help='keep each run (log.mcap, files) here')
     parser.add_argument('--write-docs', action='store_true')
     args = parser.parse_args()
     forbidden = ForbiddenSpace(config.load('sim')[0])
@@ -103,8 +107,14 @@ def main():
     rows = []
     try:
         for k in range(args.runs):
-            with tempfile.TemporaryDirectory() as folder:
-                rows.append(one_run(args.domain, 10 + k, Path(folder), forbidden))
+            if args.keep:
+                folder = Path(args.keep) / f'run{k + 1}'
+                folder.mkdir(parents=True, exist_ok=True)
+                rows.append(one_run(args.domain, 10 + k, folder, forbidden, args.arm))
+            else:
+                with tempfile.TemporaryDirectory() as folder:
+                    rows.append(one_run(args.domain, 10 + k, Path(folder), forbidden,
+                                        args.arm))
             print(rows[-1], flush=True)
     finally:
         busy.stop(loops)

@@ -36,11 +36,12 @@ from arm_control.nodes import realtime
 from arm_control.nodes.common import COMMANDS, declare_parameters, interrupt, run, STATE_STREAM
 from arm_control.nodes.messages import finite, joint_pair
 from arm_control.sysid.handover import degrees, HandOver, holding_said
-from arm_control.sysid.log import LogWriter, read_log, Samples
+from arm_control.sysid.log import LogWriter, Samples
 from arm_control.sysid.regressor import with_values
 from arm_control.sysid.report import identify, said
 from arm_control.sysid.session import provisional_model, Session
 from arm_control.sysid.settings import SysIdConfig
+from arm_control.sysid.wpilog import read_recording
 
 # Joint states for this long before driving, so that other publishers show: DDS discovery
 # took over 1 s on a loaded 2-core machine. Driving stops if one shows later.
@@ -295,7 +296,8 @@ class SysIdNode(Node):
 
     def identify(self, bag):
         notes = self.session.notes if self.session is not None else []
-        return identify(read_log(bag), self.arm, self.settings, self.directory, str(bag), notes)
+        return identify(read_recording(bag, self.settings.wpilog_entries), self.arm,
+                        self.settings, self.directory, str(bag), notes)
 
     def report(self, result) -> None:
         self.get_logger().info(said(result))

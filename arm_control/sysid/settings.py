@@ -17,6 +17,7 @@ class SysIdConfig:
     max_stall_s: float
     output_directory: str
     fit_only_bag: str
+    wpilog_entries: tuple[str, str, str, str]
     centre_rad: tuple[float, float]
     quasistatic_range_rad: tuple[float, float]
     quasistatic_acceleration_rad_s2: float
@@ -62,6 +63,13 @@ class SysIdConfig:
         if not 0.0 < band[0] < band[1]:
             raise ParameterError(f"parameter 'multisine_band_hz' = {list(band)}: "
                                  'expected [low, high] with 0 < low < high')
+        entries = params.get('wpilog_entries', ())
+        if (not isinstance(entries, (list, tuple)) or len(entries) != 4
+                or not all(isinstance(e, str) for e in entries) or not entries[0]
+                or not entries[2]):
+            raise ParameterError(f"parameter 'wpilog_entries' = {entries!r}: expected four "
+                                 'entry names [positions, velocities, applied volts, bus '
+                                 "volts], the first and third not ''")
         output_directory = text('output_directory')
         if not output_directory:
             raise ParameterError("parameter 'output_directory' is empty: expected a directory")
@@ -73,6 +81,7 @@ class SysIdConfig:
             max_stall_s=read.nonnegative('max_stall_s'),
             output_directory=output_directory,
             fit_only_bag=text('fit_only_bag'),
+            wpilog_entries=tuple(entries),
             centre_rad=read.numbers('centre_rad', 2),
             quasistatic_range_rad=nonnegative_pair('quasistatic_range_rad'),
             quasistatic_acceleration_rad_s2=read.positive('quasistatic_acceleration_rad_s2'),
