@@ -119,7 +119,8 @@ def main():
     finally:
         busy.stop(loops)
     lines = [f'{args.runs} runs of sysid through ROS beside {args.busy} busy loops '
-             '(the demo arm; then the controller on the identified file takes over):', '',
+             f'(the true arm: arm.yaml with {Path(args.arm).name}; then the controller on the '
+             'identified file takes over):', '',
              '| run | file written | exit code | arm time s | stalls ridden | stopped | '
              'peak motor A | lowest point mm | moved after hand-over deg |',
              '|---|---|---|---|---|---|---|---|---|']
