@@ -63,6 +63,13 @@ def _normal_priority() -> None:
         pass
 
 
+def _velocity_since(sample, position, now):
+    """The velocity from the last sample (received s, position, ...) to ``position`` now."""
+    if sample is None or now <= sample[0]:
+        return [0.0, 0.0]
+    return list((np.array(position[:2]) - sample[1]) / (now - sample[0]))
+
+
 def _stamp_s(msg) -> float | None:
     stamp = msg.header.stamp
     return stamp.sec + 1e-9 * stamp.nanosec if (stamp.sec or stamp.nanosec) else None
@@ -84,7 +91,7 @@ class SysIdNode(Node):
         self.joint_sample = None            # (received s, position, velocity)
         self.unsafe_start = None            # why the start cannot be excited from, when not
         self.first_joint_s = self.writer = self.session = self.label = self.work = None
-        self.voltage_pub = self.hold_model = None
+        self.voltage_pub = self.hold_model = self.bus_v = None
         self.last_command_s = self.commanded_stamp_s = -math.inf
         self.samples = Samples()            # for stage 1's fit
         self.workers = ThreadPoolExecutor(max_workers=1, initializer=_normal_priority)
@@ -123,7 +130,7 @@ class SysIdNode(Node):
             return
         now = self.now_s()
         if velocity is None or not finite(velocity):
-            velocity = self._velocity_from(position, now)
+            velocity = _velocity_since(self.joint_sample, position, now)
         self.joint_sample = (now, np.array(position[:2], float), np.array(velocity[:2], float))
         if self.first_joint_s is None:
             self.first_joint_s = now
@@ -139,11 +146,6 @@ class SysIdNode(Node):
             self.commanded_stamp_s = stamp
             self.drive(now)
 
-    def _velocity_from(self, position, now):
-        if self.joint_sample is None or now <= self.joint_sample[0]:
-            return [0.0, 0.0]
-        return list((np.array(position[:2]) - self.joint_sample[1]) / (now - self.joint_sample[0]))
-
     def on_command(self, msg: Float64MultiArray) -> None:
         """Every voltage_command, own ones too: another node's, a few, take the arm over."""
         if self.phase not in COMMANDING or self.voltage_pub is None:
@@ -156,16 +158,17 @@ class SysIdNode(Node):
         """Another node commands the arm: stop commanding (a fit under way still finishes)."""
         self.destroy_publisher(self.voltage_pub)
         self.voltage_pub = None
-        self.get_logger().info('another node commands the arm: handed over, no longer '
-                               'commanding')
+        self.get_logger().info('another node commands the arm: handed over')
         if self.phase == 'driving':
-            self.finish('the excitation was interrupted by the other node; nothing was '
-                        'fitted')
+            self.finish('the excitation was interrupted by the other node: nothing fitted')
         elif self.phase != 'fitting':
             self.finish('handed over', error=self.exit_code != 0)
 
     def on_battery(self, msg: BatteryState) -> None:
-        if self.writer is not None and self.phase != 'waiting' and math.isfinite(msg.voltage):
+        if not (math.isfinite(msg.voltage) and msg.voltage > 0.0):
+            return
+        self.bus_v = msg.voltage                # commands stay under it
+        if self.writer is not None and self.phase != 'waiting':
             self.writer.battery(_stamp_s(msg) or self.now_s(), msg)
 
     # ------------------------------------------------------------------ the run
@@ -187,7 +190,7 @@ class SysIdNode(Node):
             self.take_work()
         if self.phase == 'holding' and self.handover.expired(
                 now, self.settings.hand_over_timeout_s):
-            self.lower(now)
+            self.lower()
 
     def wait_then_start(self, now) -> None:
         if self.first_joint_s is None or now - self.first_joint_s < DISCOVERY_S:
@@ -222,7 +225,7 @@ class SysIdNode(Node):
                 self.count_publishers('voltage_command') > 1:
             session.run.stop(now, position, 'another node began publishing voltage_command')
         stalls = len(session.stalls)
-        voltage = session.command(now, position, velocity)
+        voltage = session.command(now, position, velocity, self.bus_v)
         if len(session.stalls) > stalls:
             self.get_logger().warning(f'no command for {session.stalls[-1][1]:.2f} s (this '
                                       'process was starved): rejoining the excitation')
@@ -310,8 +313,7 @@ class SysIdNode(Node):
                   with_values(self.arm, result.realisation.values), error=False)
 
     def hold(self, message: str, model, error: bool = True) -> None:
-        """Say how the identification ended, then hold the arm where the plan ended with
-        ``model`` until another node commands it (or hand_over_timeout_s)."""
+        """Say how it ended; hold the arm where the plan ended until another node takes it."""
         (self.get_logger().error if error else self.get_logger().info)(message)
         if self.voltage_pub is None or self.session is None:      # handed over, or fit-only
             self.finish('done', error=error)
@@ -324,15 +326,14 @@ class SysIdNode(Node):
         self.get_logger().info(holding_said(where, self.settings.hand_over_timeout_s,
                                             self.settings.rest_rad))
 
-    def lower(self, now) -> None:
+    def lower(self) -> None:
         try:
             self.session.lower(self.hold_model, self.joint_sample[1], self.settings.rest_rad)
+            self.phase = 'lowering'
+            self.get_logger().info('no other node took the arm: lowering it onto the rest')
         except ValueError as error:
             self.get_logger().error(f'cannot lower the arm: {error}; holding it')
             self.handover.holding_since_s = math.inf
-            return
-        self.phase = 'lowering'
-        self.get_logger().info('no other node took the arm: lowering it onto the rest')
 
     def fit_only(self) -> None:
         if self.phase == 'waiting':
@@ -354,8 +355,7 @@ class SysIdNode(Node):
         self.context.try_shutdown()          # ends spin(); main() cleans up
 
     def send_zero_volts(self) -> None:
-        """0 V, only when this node commanded the arm and still does (never over another
-        node's commands)."""
+        """0 V, only while this node commands the arm (never over another node's commands)."""
         if self.voltage_pub is None or not math.isfinite(self.last_command_s):
             return
         try:

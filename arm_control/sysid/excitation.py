@@ -45,6 +45,7 @@ MULTISINE_TONES = 5             # per joint
 MULTISINE_RAMP_S = 1.5          # the multi-sine fades in and out over this
 APPROACH_SPEED_RAD_S = 0.4      # moving to the centre first, and gliding back after a stop
 STALL_PERIODS = 2.5             # commands further apart than this many periods: a stall
+BUS_MARGIN_V = 0.3              # commands stay this far under the last bus voltage reported
 BRAKE_RAD_S2 = 8.0              # a stalled arm is first brought to rest at about this rate,
 BRAKE_MIN_S = 0.25              # over at least this long, then rejoins the plan
 
@@ -255,7 +256,8 @@ class ExcitationRun:
     """Drives an ``Excitation``: ``command(now_s, position, velocity)`` gives the voltages.
 
     V = V_ff(q_ref, q̇_ref, q̈_ref) + kp·(q_ref − q) + kd·(q̇_ref − q̇), with V_ff from the robot
-    file's inverse dynamics, then clamped to ±max_voltage and to the voltages at which each
+    file's inverse dynamics, then clamped to ±max_voltage (±(bus − ``BUS_MARGIN_V``) when the
+    bus voltage is known: the battery sags under load) and to the voltages at which each
     motor draws at most ``max_current_a``. Time starts at the first command. ``finished``
     once the excitation (or, after a stop, the glide back) is over; ``stopped`` says why it
     stopped early, if it did.
@@ -288,7 +290,7 @@ class ExcitationRun:
             return 'stopped'
         return self.motion.label_at(now_s - self.motion_began_s)[0]
 
-    def command(self, now_s, position, velocity) -> np.ndarray:
+    def command(self, now_s, position, velocity, bus_v=None) -> np.ndarray:
         if self.began_s is None:
             self.began_s = self.motion_began_s = now_s
         position, velocity = np.asarray(position, float), np.asarray(velocity, float)
@@ -310,7 +312,11 @@ class ExcitationRun:
         voltage = (np.array(self.dynamics.voltage_for(q_ref, qd_ref, qdd_ref))
                    + self.gains[:, 0] * (q_ref - position)
                    + self.gains[:, 1] * (qd_ref - velocity))
+        # Under the bus voltage the robot last reported, so that the motor controllers apply
+        # each command as sent (above it they apply the bus, which the log would not hold).
         volts = self.arm.battery.nominal_voltage
+        if bus_v is not None and math.isfinite(bus_v):
+            volts = max(min(volts, bus_v - BUS_MARGIN_V), 0.0)
         voltage = np.clip(voltage, -volts, volts)
         clamped = voltage.copy()
         # The speed a period on, extrapolated: the command is held until then.

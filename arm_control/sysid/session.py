@@ -57,10 +57,10 @@ class Session:
         """(q, q̇) the last command was computed for: the plan, logged as the instruments."""
         return self.run.reference
 
-    def command(self, now_s, position, velocity):
+    def command(self, now_s, position, velocity, bus_v=None):
         if self.began_s is None:
             self.began_s = now_s
-        return self.run.command(now_s, position, velocity)
+        return self.run.command(now_s, position, velocity, bus_v)
 
     def elapsed_s(self, now_s) -> float:
         """Arm time: since the first command."""

@@ -2,7 +2,8 @@
 
 For tests and the benchmark: the plant is the true arm (with its sensors' noise), the
 excitation is designed and tracked as the node does it (``Session``), and the log holds what
-the node would record -- the potentiometers' readings and the commands sent.
+the node would record -- the potentiometers' readings, the commands sent and the bus voltage
+(``battery_state``).
 """
 
 from dataclasses import dataclass
@@ -30,7 +31,7 @@ class SimulatedRun:
 
 class _Record:
     def __init__(self):
-        self.joints, self.commands, self.states = [], [], []
+        self.joints, self.commands, self.states, self.battery = [], [], [], []
 
     def log(self) -> Log:
         times = np.array([c[0] for c in self.commands])
@@ -38,6 +39,8 @@ class _Record:
                    position_rad=np.array([j[1] for j in self.joints]),
                    velocity_rad_s=np.array([j[2] for j in self.joints]),
                    command_time_s=times, voltage_v=np.array([c[1] for c in self.commands]),
+                   battery_time_s=np.array([b[0] for b in self.battery]),
+                   battery_v=np.array([b[1] for b in self.battery]),
                    reference_time_s=times.copy(),
                    reference_rad=np.array([c[2] for c in self.commands]).reshape(-1, 2))
 
@@ -66,9 +69,10 @@ def identification_run(truth: ArmConfig, nominal: ArmConfig, settings: SysIdConf
         reading = plant.read()
         record.joints.append((plant.time_s, reading.potentiometer_rad, reading.velocity_rad_s))
         record.states.append(reading.true_state)
+        record.battery.append((plant.time_s, reading.bus_voltage))    # as battery_state
         if not any(begin <= plant.time_s < begin + length for begin, length in stalls):
             voltage = session.command(plant.time_s, reading.potentiometer_rad,
-                                      reading.velocity_rad_s)
+                                      reading.velocity_rad_s, reading.bus_voltage)
             plant.set_voltage(voltage)
             last_command_s = plant.time_s
             # as the node logs its commands
