@@ -3,7 +3,7 @@
 A parameter is written when the data either pin it down or contradict the robot file:
 
 - pinned down: σ ≤ ``MAX_RELATIVE_SIGMA``·|π| -- the value is known to that share, and so
-  lies more than 1/MAX_RELATIVE_SIGMA standard errors from zero;
+  lies more than 1/MAX_RELATIVE_SIGMA (2.5) standard errors from zero;
 - contradicting the file: the robot file's value lies more than ``CONTRADICTS_SIGMA``
   standard errors from the estimate -- the estimate, loose as it is, is nearer the arm
   (a friction the file has and the arm lacks is written as near 0).
@@ -32,7 +32,7 @@ INERTIAL_FIELDS = ('mass_kg', 'com_from_joint_m', 'inertia_about_com_kgm2')
 FRICTION_FIELDS = {4: 'shoulder.viscous_friction_nm_s_per_rad',
                    5: 'shoulder.coulomb_friction_nm',
                    6: 'elbow.viscous_friction_nm_s_per_rad', 7: 'elbow.coulomb_friction_nm'}
-MAX_RELATIVE_SIGMA = 0.3
+MAX_RELATIVE_SIGMA = 0.4
 CONTRADICTS_SIGMA = 3.0
 INERTIAL = 4                    # α, γ, p1, p2 come first in π
 COULOMB = {5: 0, 7: 1}          # index in π: joint
