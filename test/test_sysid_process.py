@@ -18,6 +18,9 @@ from arm_control.model.world import ForbiddenSpace
 
 HELD_S = 4.0                 # the arm watched after the fit, before the controller starts
 HELD_RAD = math.radians(1.0)  # ... moving at most this much: held, not falling
+# Across the hand-over the controller holds the arm where its own estimate puts it: up to 2 deg
+# from sysid's hold was seen beside busy loops; a fall moves tens of degrees in a second.
+HANDED_RAD = math.radians(5.0)
 
 SHORT = ('-p', 'quasistatic_range_rad:=[0.3, 0.4]',
          '-p', 'quasistatic_acceleration_rad_s2:=1.0',
@@ -74,7 +77,7 @@ def test_sysid_identifies_the_demo_arm_hands_it_over_and_fits_its_log_again(
     probe.spin_for(HELD_S)
     after = truth_since(truth, handed - 0.5)
     assert np.all(forbidden.is_free(after))
-    assert np.max(np.abs(after - held[-1])) < 2.0 * HELD_RAD, \
+    assert np.max(np.abs(after - held[-1])) < HANDED_RAD, \
         np.degrees(np.max(np.abs(after - held[-1]), axis=0))
     output = sysid.output()
     assert 'stage 2 designed and tracked with the stage-1 fit' in output
