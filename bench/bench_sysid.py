@@ -80,7 +80,8 @@ def arms(identified_file=None):
 
 # --- prediction -------------------------------------------------------------------------
 
-def predict_windows(arm, times_s, states, voltages, starts, window_s=WINDOW_S):
+def predict_windows(arm, times_s, states, voltages, starts, window_s=WINDOW_S,
+                    stride_s=STRIDE_S):
     """Largest joint error (deg) in each window, the model integrated by RK4 at 1 ms from
     ``starts[k]`` (a state) at sample k of ``times_s``, with the voltage applied then.
 
@@ -89,7 +90,7 @@ def predict_windows(arm, times_s, states, voltages, starts, window_s=WINDOW_S):
     step = float(np.median(np.diff(times_s)))
     substeps = max(1, int(round(step / PHYSICS_S)))
     length = int(round(window_s / step))
-    stride = max(1, int(round(STRIDE_S / step)))
+    stride = max(1, int(round(stride_s / step)))
     errors = []
     for k in range(0, min(len(times_s), len(voltages) + 1) - length, stride):
         x = list(starts[k])

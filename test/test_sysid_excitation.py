@@ -107,6 +107,7 @@ def test_an_arm_that_strays_stops_the_excitation_and_glides_back(arm, settings):
     run.command(0.02, astray, np.zeros(2))
     assert run.stopped is not None and 'elbow strayed' in run.stopped
     assert np.allclose(run.reference[0], astray)            # the glide starts where it is
-    run.command(10.0, centre, np.zeros(2))
+    for now in np.arange(0.04, 10.0, 0.02):
+        run.command(now, centre, np.zeros(2))
     assert np.allclose(run.reference[0], centre) and run.finished(10.0)
     assert math.isclose(run.reference[1][1], 0.0, abs_tol=1e-12)

@@ -13,6 +13,7 @@ from arm_control.model.plant import ArmPlant
 from arm_control.model.world import ForbiddenSpace
 from arm_control.sysid.excitation import per_motor_current_a
 from arm_control.sysid.fit import fit_log, hac_covariance, weighted_least_squares
+from arm_control.sysid.quality import assess, identified_values
 from arm_control.sysid.regressor import BASE_NAMES, base_parameters, regressor
 from arm_control.sysid.settings import SysIdConfig
 from arm_control.sysid.simulated import identification_run
@@ -133,3 +134,42 @@ def test_the_identification_run_is_safe_and_short(noisy_run, demo, settings):
         assert np.max(np.abs(current)) <= settings.max_current_a + 1.0   # noisy velocity
     assert noisy_run.arm_time_s < 60.0
     assert noisy_run.session.stopped is None
+
+
+def test_stalls_of_the_command_stream_are_ridden_through_within_the_current_cap(
+        demo, arm, settings):
+    """The node starved of CPU for 0.45 s three times (in the multi-sine, the shoulder's steps
+    and the elbow's): the robot gets the last command, then 0 V. The excitation rejoins the
+    plan each time instead of stopping, never enters forbidden space, keeps every motor
+    under max_current_a, and the fit (which leaves the stalls out) still finds the arm."""
+    stalls = ((12.0, 0.45), (27.5, 0.45), (39.0, 0.45))
+    run = identification_run(demo, arm, settings, seed=2, stalls=stalls)
+    assert run.session.stopped is None and len(run.session.stalls) == 3
+    assert np.all(ForbiddenSpace(demo).is_free(run.true_state[:, :2]))
+    assert np.all(run.peak_current_a <= settings.max_current_a)
+    assert run.arm_time_s < 60.0
+    result = fit(run, arm, settings)
+    z = (result.parameters - base_parameters(demo)) / result.standard_errors
+    assert np.all(np.abs(z) < 3.0), dict(zip(BASE_NAMES, np.round(z, 2)))
+
+
+def test_a_joint_that_never_moves_identifies_nothing_of_its_own(demo, arm, settings):
+    """Only the elbow excited, the shoulder held: the shoulder's inertia, moment and
+    friction are never seen (σ = ∞), are reported with that reason and are not written;
+    the elbow's are found."""
+    still = dataclasses.replace(settings, quasistatic_range_rad=(0.0, 1.0),
+                                multisine_amplitude_rad=(0.0, 0.9), dynamic_step_rad=(0.0, 0.7))
+    result = fit(identification_run(demo, arm, still, seed=3), arm, settings)
+    quality = assess(result, arm)
+    shoulder = [BASE_NAMES.index(n) for n in ('shoulder_inertia', 'shoulder_moment',
+                                              'shoulder_viscous', 'shoulder_coulomb')]
+    assert np.all(np.isinf(result.standard_errors[shoulder]))
+    assert set(quality.unidentified) == {BASE_NAMES[k] for k in shoulder}
+    assert all(quality.reasons[k] is not None for k in shoulder)
+    values, _ = identified_values(result, arm)
+    assert set(values.values) == {'elbow.viscous_friction_nm_s_per_rad',
+                                  'elbow.coulomb_friction_nm'}
+    elbow = [BASE_NAMES.index(n) for n in ('elbow_inertia', 'elbow_moment', 'elbow_viscous',
+                                           'elbow_coulomb')]
+    z = (result.parameters - base_parameters(demo))[elbow] / result.standard_errors[elbow]
+    assert np.all(np.abs(z) < 4.0), z                  # one run: a wide bound

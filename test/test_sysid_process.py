@@ -1,15 +1,26 @@
 """The installed ``sysid`` executable against the sim with the demo arm, over DDS: it drives a
-shortened excitation, writes a parameter file that layers over arm.yaml, and fits the same
-log again without driving; it will not drive while another node commands the arm."""
+shortened excitation, writes a parameter file that layers over arm.yaml, holds the arm until
+the controller takes it over without a drop, and fits the same log again without driving;
+it will not drive while another node commands the arm."""
 
+import math
 import time
 
+import numpy as np
 import pytest
 from ros_harness import install_prefix
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 import yaml
 
 from arm_control import config, parameters
+from arm_control.model.world import ForbiddenSpace
+
+HELD_S = 4.0                 # the arm watched after the fit, before the controller starts
+HELD_RAD = math.radians(1.0)  # ... moving at most this much: held, not falling
+# Across the hand-over the controller holds the arm where its own estimate puts it: up to 2 deg
+# from sysid's hold was seen beside busy loops; a fall moves tens of degrees in a second.
+HANDED_RAD = math.radians(5.0)
 
 SHORT = ('-p', 'quasistatic_range_rad:=[0.3, 0.4]',
          '-p', 'quasistatic_acceleration_rad_s2:=1.0',
@@ -29,21 +40,50 @@ def wait_for_exit(process, timeout_s):
     return process.process.returncode
 
 
-def test_sysid_identifies_the_demo_arm_and_fits_its_own_log_again(launch, probe, tmp_path):
+def truth_since(truth, since_s):
+    return np.array([m.position for t, m in truth if t >= since_s]).reshape(-1, 2)
+
+
+def test_sysid_identifies_the_demo_arm_hands_it_over_and_fits_its_log_again(
+        launch, probe, tmp_path):
     launch('sim', '--params-file', share('arm.yaml'), '--params-file',
            share('sysid_demo_arm.yaml'))
     commands = probe.collect(Float64MultiArray, '/voltage_command')
+    truth = []
+    probe.node.create_subscription(JointState, '/sim/ground_truth',
+                                   lambda m: truth.append((time.monotonic(), m)), 100)
     sysid = launch('sysid', *SHORT, '-p', f'output_directory:={tmp_path / "run"}')
+    written = tmp_path / 'run' / 'identified_params.yaml'
     began = time.monotonic()
-    while sysid.alive() and time.monotonic() - began < 120.0:
+    while sysid.alive() and not written.exists() and time.monotonic() - began < 120.0:
         probe.spin_for(0.2)
-    assert wait_for_exit(sysid, 1.0) == 0, sysid.output()
+    assert written.exists(), sysid.output()
+    # Done, and the arm is held: above the floor, still, and sysid still commanding.
+    probe.spin_for(1.0)
+    since = time.monotonic()
+    probe.spin_for(HELD_S)
+    held = truth_since(truth, since)
+    forbidden = ForbiddenSpace(config.load('sim')[0])
+    assert len(held) > 10 * HELD_S and np.all(forbidden.is_free(held))
+    assert np.max(np.ptp(held, axis=0)) < HELD_RAD, np.degrees(np.ptp(held, axis=0))
+    assert sysid.alive(), sysid.output()
+    # The controller on the identified file takes the arm over: sysid stops and exits, and
+    # the arm stays where it was held.
+    own = list(commands)
+    controller = launch('controller', '--params-file', share('arm.yaml'), '--params-file',
+                        str(written))
+    assert wait_for_exit(sysid, 30.0) == 0, sysid.output()
+    handed = time.monotonic()
+    probe.spin_for(HELD_S)
+    after = truth_since(truth, handed - 0.5)
+    assert np.all(forbidden.is_free(after))
+    assert np.max(np.abs(after - held[-1])) < HANDED_RAD, \
+        np.degrees(np.max(np.abs(after - held[-1]), axis=0))
     output = sysid.output()
     assert 'stage 2 designed and tracked with the stage-1 fit' in output
     files = {p.name for p in (tmp_path / 'run').iterdir()}
     assert {'log.mcap', 'identified_params.yaml', 'report.md', 'fit.png'} <= files
     # A file that parses, names only the identified parameters, and layers over arm.yaml.
-    written = tmp_path / 'run' / 'identified_params.yaml'
     assert list(yaml.safe_load(written.read_text())) == ['/**']
     overlay = parameters.read_parameter_file(written, 'controller')
     assert len(overlay) == 10 and all(name.split('.')[0] in ('shoulder', 'elbow')
@@ -54,11 +94,12 @@ def test_sysid_identifies_the_demo_arm_and_fits_its_own_log_again(launch, probe,
     # The demo forearm's moment mb·rb is 22 kg x 0.55 m (arm.yaml says 15 x 0.4).
     assert identified.elbow.mass_kg * identified.elbow.com_from_joint_m == \
         pytest.approx(12.1, rel=0.05)
-    # One command per joint state, 50 Hz, and 0 V last.
-    assert 30.0 * 19.0 < len(commands) < 60.0 * 40.0
-    assert list(commands[-1].data) == [0.0, 0.0]
+    # sysid never sent 0 V: every command it sent held or moved the arm.
+    assert len(own) > 30.0 * 19.0 and not any(list(c.data) == [0.0, 0.0] for c in own)
 
     # The same log, fitted without driving: the same file, and not one command sent.
+    controller.stop()
+    probe.spin_for(0.5)
     heard = len(commands)
     again = launch('sysid', '-p', f'fit_only_bag:={tmp_path / "run" / "log.mcap"}',
                    '-p', f'output_directory:={tmp_path / "again"}')

@@ -16,8 +16,13 @@ step slower) until it passes, or dropped; each change is reported.
 ``ExcitationRun`` tracks it: the model's inverse dynamics as feedforward plus PD on the
 joint_states, every command clamped so that no motor draws more than ``max_current_a``
 (|V − G·ω/Kv|/R per motor) -- under the motor controllers' own limit, so every command is
-applied as sent and the log holds the voltage the arm really got. It stops (and glides back
-to the centre) if the arm strays from the plan or nears forbidden space.
+applied as sent and the log holds the voltage the arm really got; the limit is kept at the
+speed the arm has now and at the speed it will have a period on, as the command is held that
+long. It stops (and glides back to the centre) if the arm strays from the plan or nears
+forbidden space. A gap in the commands (the node starved of CPU: meanwhile the arm got the
+last command, then 0 V) up to ``max_stall_s`` is ridden through: the plan rejoins the
+excitation from where the arm is, with a quintic from its state to the excitation's at the
+instant the commands stopped, and goes on from there.
 """
 
 from dataclasses import dataclass
@@ -28,7 +33,7 @@ import numpy as np
 from arm_control.config import ArmConfig
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.world import ForbiddenSpace
-from arm_control.sysid.segments import Hold, MultiSine, Quintic, Sweep
+from arm_control.sysid.segments import Hold, Join, MultiSine, Quintic, Sweep, Tail
 from arm_control.sysid.settings import SysIdConfig
 
 CHECK_STEP_S = 0.005
@@ -39,6 +44,10 @@ PAUSE_S = 0.3                   # rest at the centre between parts
 MULTISINE_TONES = 5             # per joint
 MULTISINE_RAMP_S = 1.5          # the multi-sine fades in and out over this
 APPROACH_SPEED_RAD_S = 0.4      # moving to the centre first, and gliding back after a stop
+STALL_PERIODS = 2.5             # commands further apart than this many periods: a stall
+BUS_MARGIN_V = 0.3              # commands stay this far under the last bus voltage reported
+BRAKE_RAD_S2 = 8.0              # a stalled arm is first brought to rest at about this rate,
+BRAKE_MIN_S = 0.25              # over at least this long, then rejoins the plan
 
 
 @dataclass(frozen=True)
@@ -69,6 +78,20 @@ class Excitation:
             local = np.clip(t[where] - self.starts_s[k], 0.0, self.segments[k].duration_s)
             q[where], qd[where], qdd[where] = self.segments[k].sample(local)
         return q, qd, qdd
+
+    def after(self, t) -> list:
+        """The parts left from time ``t`` on (the one under way cut at ``t``)."""
+        parts, start = [], 0.0
+        for part in self.parts:
+            left = []
+            for segment in part.segments:
+                end = start + segment.duration_s
+                if end > t:
+                    left.append(segment if start >= t else Tail(segment, t - start))
+                start = end
+            if left:
+                parts.append(Part(part.name, tuple(left)))
+        return parts
 
     def label_at(self, t) -> list:
         index = np.clip(np.searchsorted(self.starts_s, np.atleast_1d(t), side='right') - 1,
@@ -233,7 +256,8 @@ class ExcitationRun:
     """Drives an ``Excitation``: ``command(now_s, position, velocity)`` gives the voltages.
 
     V = V_ff(q_ref, q̇_ref, q̈_ref) + kp·(q_ref − q) + kd·(q̇_ref − q̇), with V_ff from the robot
-    file's inverse dynamics, then clamped to ±max_voltage and to the voltages at which each
+    file's inverse dynamics, then clamped to ±max_voltage (±(bus − ``BUS_MARGIN_V``) when the
+    bus voltage is known: the battery sags under load) and to the voltages at which each
     motor draws at most ``max_current_a``. Time starts at the first command. ``finished``
     once the excitation (or, after a stop, the glide back) is over; ``stopped`` says why it
     stopped early, if it did.
@@ -251,6 +275,8 @@ class ExcitationRun:
         self.stopped = None                   # the reason, once stopped early
         self.current_clamped = 0              # commands the current limit changed
         self.reference = None                 # (q, q̇) the last command was computed for
+        self.last_s = self.last_velocity = None
+        self.stalls = []                      # (when, how long) of each gap ridden through
 
     def elapsed_s(self, now_s) -> float:
         return 0.0 if self.began_s is None else now_s - self.began_s
@@ -262,12 +288,20 @@ class ExcitationRun:
     def label_at(self, now_s) -> str:
         if self.stopped is not None:
             return 'stopped'
-        return self.excitation.label_at(self.elapsed_s(now_s))[0]
+        return self.motion.label_at(now_s - self.motion_began_s)[0]
 
-    def command(self, now_s, position, velocity) -> np.ndarray:
+    def command(self, now_s, position, velocity, bus_v=None) -> np.ndarray:
         if self.began_s is None:
             self.began_s = self.motion_began_s = now_s
         position, velocity = np.asarray(position, float), np.asarray(velocity, float)
+        gap = now_s - self.last_s if self.last_s is not None else 0.0
+        if gap > STALL_PERIODS / self.settings.loop_rate_hz:
+            if self.stopped is None and gap > self.settings.max_stall_s:
+                self.stop(now_s, position, f'the commands stalled for {gap:.2f} s '
+                          f'(max_stall_s {self.settings.max_stall_s:g} s)')
+            else:
+                self.rejoin(now_s, position, velocity, gap)
+            self.last_velocity = None
         q_ref, qd_ref, qdd_ref = (v[0] for v in self.motion.sample(now_s - self.motion_began_s))
         if self.stopped is None:
             problem = self._problem(position, q_ref)
@@ -278,16 +312,51 @@ class ExcitationRun:
         voltage = (np.array(self.dynamics.voltage_for(q_ref, qd_ref, qdd_ref))
                    + self.gains[:, 0] * (q_ref - position)
                    + self.gains[:, 1] * (qd_ref - velocity))
+        # Under the bus voltage the robot last reported, so that the motor controllers apply
+        # each command as sent (above it they apply the bus, which the log would not hold).
         volts = self.arm.battery.nominal_voltage
+        if bus_v is not None and math.isfinite(bus_v):
+            volts = max(min(volts, bus_v - BUS_MARGIN_V), 0.0)
         voltage = np.clip(voltage, -volts, volts)
         clamped = voltage.copy()
+        # The speed a period on, extrapolated: the command is held until then.
+        ahead = velocity if self.last_velocity is None else 2.0 * velocity - self.last_velocity
+        self.last_s, self.last_velocity = now_s, velocity
         for joint in range(2):
-            low, high = voltage_range_for_current(self.dynamics, self.arm, joint,
-                                                  velocity[joint], self.settings.max_current_a)
+            now_low, now_high = voltage_range_for_current(
+                self.dynamics, self.arm, joint, velocity[joint], self.settings.max_current_a)
+            next_low, next_high = voltage_range_for_current(
+                self.dynamics, self.arm, joint, ahead[joint], self.settings.max_current_a)
+            # Within the limit now in any case; a period on too, as far as that allows.
+            low = min(max(now_low, next_low), now_high)
+            high = max(min(now_high, next_high), low)
             clamped[joint] = min(max(voltage[joint], low), high)
         if np.any(clamped != voltage):
             self.current_clamped += 1
         return clamped
+
+    def rejoin(self, now_s, position, velocity, gap_s) -> None:
+        """After a gap in the commands: a quintic from the arm's state to the plan's at the
+        last command, then the rest of the plan."""
+        t = self.last_s - self.motion_began_s
+        left = self.motion.after(t)
+        if left:
+            target = [v[0] for v in self.motion.sample(t)]
+        else:
+            end = self.motion.segments[-1].end_rad
+            target, left = (end, np.zeros(2), np.zeros(2)), [Part('holding', (Hold(end,
+                                                                                   PAUSE_S),))]
+        # Brake: a quintic to rest, stopping where a constant deceleration would.
+        brake_s = max(BRAKE_MIN_S, float(np.max(np.abs(velocity))) / BRAKE_RAD_S2)
+        stop = position + 0.5 * velocity * brake_s
+        brake = Join((position, velocity, np.zeros(2)), (stop, np.zeros(2), np.zeros(2)),
+                     brake_s)
+        duration = max(1.0, 1.875 * float(np.max(np.abs(target[0] - stop)))
+                       / APPROACH_SPEED_RAD_S)
+        join = Join((stop, np.zeros(2), np.zeros(2)), target, duration)
+        self.motion = Excitation([Part('rejoining after a stall', (brake, join))] + left)
+        self.motion_began_s = now_s
+        self.stalls.append((now_s, gap_s))
 
     def _problem(self, position, q_ref):
         error = np.abs(q_ref - position)

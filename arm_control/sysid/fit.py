@@ -47,8 +47,10 @@ POLYORDER = 3
 GAP_PERIODS = 2.5          # a step longer than this many sample periods splits the log
 LAG_STEPS = 17             # lags tried across ±max_command_lag_s
 MIN_SAMPLES = 50
+UNEXCITED = 1e-6           # a column this small against the largest is not excited
 HAC_WINDOWS = 2             # residuals are taken as correlated over this many filter windows
 VISCOUS_COLUMNS = ((0, 4), (1, 6))     # (row, column) of b_a·θ̇a and b_b·θ̇b in Y
+PARAMETER_JOINT = (0, 1, 0, 1, 0, 0, 1, 1)  # the joint whose torque each parameter is judged by
 
 
 def window_samples(window_s: float, period_s: float) -> int:
@@ -72,7 +74,9 @@ def _filter(samples, weights):
 def applied_voltage(log: Log, start_s, end_s, lag_s: float):
     """The mean voltage over [start_s, end_s] (arrays): commands held (zero-order) from
     ``lag_s`` after they were sent, clipped to the battery voltage where it was logged;
-    ``inside`` is False before the first command and after the last one's period."""
+    ``inside`` is False before the first command, after the last one's period, and over a
+    gap in the commands (one held more than ``GAP_PERIODS`` periods: the node stalled, and
+    the robot timed out to 0 V meanwhile, which the log does not hold)."""
     edges = log.command_time_s + lag_s
     volts = log.voltage_v
     held = np.diff(edges)
@@ -84,7 +88,11 @@ def applied_voltage(log: Log, start_s, end_s, lag_s: float):
 
     mean = (area(end_s) - area(start_s)) / (end_s - start_s)[:, None]
     last_hold = float(np.median(held)) if len(held) else 0.0
-    inside = (start_s >= edges[0]) & (end_s <= edges[-1] + last_hold)
+    stalled = np.concatenate([[0], np.cumsum(np.append(held > GAP_PERIODS * last_hold, False))])
+    first = np.clip(np.searchsorted(edges, start_s, side='right') - 1, 0, len(edges) - 1)
+    last = np.clip(np.searchsorted(edges, end_s, side='left') - 1, 0, len(edges) - 1)
+    inside = ((start_s >= edges[0]) & (end_s <= edges[-1] + last_hold)
+              & (stalled[last + 1] == stalled[first]))
     if len(log.battery_v):
         bus = np.interp((start_s + end_s) / 2.0, log.battery_time_s, log.battery_v)
         mean = np.clip(mean, -bus[:, None], bus[:, None])
@@ -222,6 +230,9 @@ class FitResult:
     samples: int                         # samples that entered the fit (either joint)
     duration_s: float
     condition_number: float              # of the weighted regressor, columns scaled to 1
+    column_rms: np.ndarray               # (8,) RMS of each column over its joint's rows used
+    torque_rms_nm: np.ndarray            # (2,) RMS of each joint's torque over its rows used
+    moving_samples: np.ndarray           # (2, 2) per joint, samples used moving − and +
     time_s: np.ndarray                   # for the plot: every commanded sample ...
     measured_v: np.ndarray               # ... the voltage the arm got (filtered)
     predicted_v: np.ndarray              # ... the identified model's
@@ -258,6 +269,7 @@ def fit_log(log: Log, arm: ArmConfig, window_s: float, max_lag_s: float,
         speed = planned.velocity
     back_emf = coefficients[:, 1] * filtered.back_emf_velocity
     with_lag = max_lag_s > 0.0
+    nominal = base_parameters(arm)
 
     def solve(lag):
         volts, rates, inside = filtered.voltage(log, lag)
@@ -267,6 +279,11 @@ def fit_log(log: Log, arm: ArmConfig, window_s: float, max_lag_s: float,
         target = (coefficients[:, 0] * volts - back_emf).reshape(-1)
         rows = use.reshape(-1)                  # sample k: row 2k shoulder, 2k + 1 elbow
         weights = np.ones(len(target))
+        # A column the samples used never excite (a joint that never moved) is no unknown:
+        # its parameter keeps the robot file's value, with no information (σ = ∞).
+        norms = np.linalg.norm(base_rows[rows], axis=0)
+        excited = norms > UNEXCITED * np.max(norms)
+        target = target - base_rows[:, ~excited] @ nominal[~excited]
         design_rows = base_rows
         instrument_rows = None if planned is None else planned.design.reshape(-1,
                                                                               PARAMETER_COUNT)
@@ -282,17 +299,22 @@ def fit_log(log: Log, arm: ArmConfig, window_s: float, max_lag_s: float,
                     instrument_rows = np.hstack([
                         instrument_rows,
                         np.gradient(needed, filtered.period_s, axis=0).reshape(-1, 1)])
-            solution, _ = weighted_least_squares(
-                design_rows[rows], target[rows], weights[rows],
-                None if instrument_rows is None else instrument_rows[rows])
+            extra = design_rows.shape[1] - PARAMETER_COUNT
+            columns = np.concatenate([excited, np.ones(extra, bool)])
+            solution = np.append(nominal, np.zeros(extra))
+            solution[~columns] = 0.0
+            solution[columns], _ = weighted_least_squares(
+                design_rows[rows][:, columns], target[rows], weights[rows],
+                None if instrument_rows is None else instrument_rows[rows][:, columns])
             residual = target - design_rows @ solution
+            solution[~columns] = nominal[~excited]
             spread = np.array([np.sqrt(np.mean(residual.reshape(-1, 2)[use[:, j], j] ** 2))
-                               for j in range(2)])
+                               if np.any(use[:, j]) else 1.0 for j in range(2)])
             weights = np.tile(1.0 / np.maximum(spread, 1e-12), len(inside))
         # The likelihood of Gaussian residuals with a variance per joint: Σ_j n_j·log σ_j.
         cost = float(np.sum(use.sum(axis=0) * np.log(np.maximum(spread, 1e-300))))
         return cost, solution, residual, weights, volts, use, inside, design_rows, \
-            instrument_rows
+            instrument_rows, columns
 
     lags = np.linspace(-max_lag_s, max_lag_s, LAG_STEPS) if with_lag else np.zeros(1)
     solutions = [(lag, solve(lag)) for lag in lags]
@@ -301,21 +323,35 @@ def fit_log(log: Log, arm: ArmConfig, window_s: float, max_lag_s: float,
         raise ValueError(f'too few samples with both joint states and commands '
                          f'(at least {MIN_SAMPLES} needed)')
     best = min(solutions, key=lambda solution: solution[1][0])
-    lag, (_, estimate, residual, weights, volts, use, inside, design_rows, instrument_rows) = \
-        best
+    lag, (_, estimate, residual, weights, volts, use, inside, design_rows, instrument_rows,
+          columns) = best
     rows = use.reshape(-1)
     weighted = design_rows * (weights * rows)[:, None]
-    covariance = hac_covariance(
-        weighted, residual * weights * rows, HAC_WINDOWS * 2 * len(filtered.weights),
-        None if instrument_rows is None else instrument_rows * (weights * rows)[:, None])
+    covariance = np.diag(np.where(columns, 0.0, np.inf))
+    covariance[np.ix_(columns, columns)] = hac_covariance(
+        weighted[:, columns], residual * weights * rows,
+        HAC_WINDOWS * 2 * len(filtered.weights),
+        None if instrument_rows is None else
+        instrument_rows[:, columns] * (weights * rows)[:, None])
+    weighted = weighted[:, :PARAMETER_COUNT][:, columns[:PARAMETER_COUNT]]
     lag_sigma = math.sqrt(covariance[-1, -1]) if with_lag else 0.0
     if with_lag:
         lag += estimate[-1]
     estimate, covariance = estimate[:PARAMETER_COUNT], \
         covariance[:PARAMETER_COUNT, :PARAMETER_COUNT]
     scaled = weighted[rows] / np.linalg.norm(weighted[rows], axis=0)
+    target = (coefficients[:, 0] * volts - back_emf).reshape(-1)
+    joint_of_row = np.tile([0, 1], len(use))
+
+    def rms(values):
+        return float(np.sqrt(np.mean(values ** 2))) if len(values) else math.nan
+    column_rms = np.array([rms(base_rows[rows & (joint_of_row == j), k])
+                           for k, j in enumerate(PARAMETER_JOINT)])
+    torque_rms = np.array([rms(target[rows & (joint_of_row == j)]) for j in range(2)])
+    moving = np.array([[np.sum(use[:, j] & (speed[:, j] < 0.0)),
+                        np.sum(use[:, j] & (speed[:, j] > 0.0))] for j in range(2)])
     residual_nm = np.array([np.sqrt(np.mean(residual.reshape(-1, 2)[use[:, j], j] ** 2))
-                            for j in range(2)])
+                            if np.any(use[:, j]) else math.nan for j in range(2)])
 
     def as_voltage(parameters):        # at the grid lag (the refinement is within a step)
         torque = (filtered.design @ parameters)[inside]
@@ -329,6 +365,7 @@ def fit_log(log: Log, arm: ArmConfig, window_s: float, max_lag_s: float,
         residual_rms_nm=residual_nm, residual_rms_v=residual_nm / coefficients[:, 0],
         measured_rms_v=np.std(measured, axis=0), samples=int(np.any(use, axis=1).sum()),
         duration_s=float(times[-1] - times[0]),
-        condition_number=float(np.linalg.cond(scaled)),
+        condition_number=float(np.linalg.cond(scaled)), column_rms=column_rms,
+        torque_rms_nm=torque_rms, moving_samples=moving,
         time_s=times - log.joint_time_s[0], measured_v=measured,
         predicted_v=as_voltage(estimate), nominal_v=as_voltage(base_parameters(arm)))

@@ -67,6 +67,29 @@ class Log:
             else 0.0
 
 
+class Samples:
+    """What the node has logged so far, kept in memory for the stage-1 fit."""
+
+    def __init__(self):
+        self.joints, self.commands = [], []
+
+    def joint(self, time_s, position, velocity) -> None:
+        self.joints.append((time_s, np.array(position, float), np.array(velocity, float)))
+
+    def command(self, time_s, voltage, reference_rad) -> None:
+        self.commands.append((time_s, np.array(voltage, float), np.array(reference_rad, float)))
+
+    def log(self) -> Log:
+        joints, commands = self.joints, self.commands
+        times = np.array([c[0] for c in commands])
+        return Log(joint_time_s=np.array([s[0] for s in joints]),
+                   position_rad=np.array([s[1] for s in joints]),
+                   velocity_rad_s=np.array([s[2] for s in joints]),
+                   command_time_s=times, voltage_v=np.array([c[1] for c in commands]),
+                   reference_time_s=times.copy(),
+                   reference_rad=np.array([c[2] for c in commands]))
+
+
 def _stamp(time_s: float) -> dict:
     nanoseconds = int(round(time_s * 1e9))
     return {'sec': nanoseconds // 1_000_000_000, 'nanosec': nanoseconds % 1_000_000_000}

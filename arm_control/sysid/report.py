@@ -19,6 +19,7 @@ import numpy as np
 from arm_control.config import ArmConfig
 from arm_control.sysid.fit import fit_log, FitResult
 from arm_control.sysid.log import Log
+from arm_control.sysid.quality import identified_values, Quality
 from arm_control.sysid.regressor import (BASE_PARAMETERS, base_parameters, Realisation,
                                          RealisationError, realise)
 from arm_control.sysid.settings import SysIdConfig
@@ -83,9 +84,13 @@ def overlay_yaml(realisation: Realisation, fit: FitResult, nominal: ArmConfig,
     lines += [f'# Note: {note}' for note in realisation.notes]
     lines += ['', '/**:', '  ros__parameters:']
     for joint in ('shoulder', 'elbow'):
+        if not any(name.startswith(joint + '.') for name in realisation.values):
+            continue
         lines.append(f'    {joint}:')
         for field, unit in PHYSICAL:
             name = f'{joint}.{field}'
+            if name not in realisation.values:
+                continue
             value, spread = realisation.values[name], sigma.get(name, math.nan)
             text = f'      {field}: {value:.6g}'       # enough digits to give π back
             lines.append(f'{text:<46}# +/- {_number(spread)} {unit} (1 sigma)')
@@ -93,7 +98,8 @@ def overlay_yaml(realisation: Realisation, fit: FitResult, nominal: ArmConfig,
 
 
 def report_markdown(fit: FitResult, realisation: Realisation | None, nominal: ArmConfig,
-                    source: str, notes=(), truth: ArmConfig | None = None) -> str:
+                    source: str, notes=(), truth: ArmConfig | None = None,
+                    quality: Quality | None = None) -> str:
     """The fit in words and tables: parameters ±1σ beside the robot file's, the residuals."""
     file_values = base_parameters(nominal)
     true_values = base_parameters(truth) if truth is not None else None
@@ -105,13 +111,16 @@ def report_markdown(fit: FitResult, realisation: Realisation | None, nominal: Ar
              f'{1000 * fit.lag_s:+.1f} ± {1000 * fit.lag_sigma_s:.1f} ms; condition number of '
              f'the (column-scaled) regressor {fit.condition_number:.1f}; {estimator}.', '',
              '## Base parameters', '',
-             '| parameter | what | robot file | identified | ±1σ |'
-             + (' true |' if truth is not None else ''),
-             '|---|---|---|---|---|' + ('---|' if truth is not None else '')]
+             '| parameter | what | robot file | identified | ±1σ | σ/value | 2σ torque share '
+             '| pinned down |' + (' true |' if truth is not None else ''),
+             '|---|---|---|---|---|---|---|---|' + ('---|' if truth is not None else '')]
     for k, (name, unit, meaning) in enumerate(BASE_PARAMETERS):
+        known = ('—' if quality is None else
+                 f'{quality.relative_sigma[k]:.1%} | {quality.torque_share[k]:.2%} | '
+                 + ('yes' if quality.identified[k] else '**no**'))
         row = (f'| `{name}` ({unit}) | {meaning} | {_number(file_values[k], 0.0)} | '
                f'{_number(fit.parameters[k], fit.standard_errors[k])} | '
-               f'{_number(fit.standard_errors[k])} |')
+               f'{_number(fit.standard_errors[k])} | {known} |')
         if true_values is not None:
             row += f' {_number(true_values[k], 0.0)} |'
         lines.append(row)
@@ -189,6 +198,18 @@ class Identification:
     plot_file: Path
 
 
+def said(result: Identification) -> str:
+    """The fit in one line for the node's log."""
+    fit = result.fit
+    line = (f'fitted {fit.samples} samples; residual RMS shoulder {fit.residual_rms_v[0]:.3f} V'
+            f', elbow {fit.residual_rms_v[1]:.3f} V; command lag {1000 * fit.lag_s:+.1f} ms; '
+            f'report {result.report_file}, plot {result.plot_file}')
+    if not fit.instrumented:
+        line += ('; the log holds no plan (/sysid/reference): fitted by least squares, whose '
+                 'inertias the sensor noise pulls low in closed loop')
+    return line
+
+
 def identify(log: Log, nominal: ArmConfig, settings: SysIdConfig, directory, source: str,
              notes=()) -> Identification:
     """Fit ``log``, then write identified_params.yaml, report.md and fit.png to ``directory``.
@@ -200,17 +221,22 @@ def identify(log: Log, nominal: ArmConfig, settings: SysIdConfig, directory, sou
     fit = fit_log(log, nominal, settings.smoothing_window_s, settings.max_command_lag_s,
                   settings.min_speed_rad_s)
     notes = list(notes) + list(log.notes)
+    quality = None
     try:
-        realisation, error = realise(fit.parameters, nominal), None
+        realisation, quality = identified_values(fit, nominal)
+        error = None if realisation.values else 'the log identifies no parameter'
     except RealisationError as problem:
         realisation, error = None, str(problem)
+    if error is not None:
         notes.append(f'no parameter file written: {error}')
+        realisation = None
     parameter_file = None
     if realisation is not None:
         parameter_file = directory / 'identified_params.yaml'
         parameter_file.write_text(overlay_yaml(realisation, fit, nominal, source))
     report_file = directory / 'report.md'
-    report_file.write_text(report_markdown(fit, realisation, nominal, source, notes))
+    report_file.write_text(report_markdown(fit, realisation, nominal, source, notes,
+                                           quality=quality))
     plot_file = directory / 'fit.png'
     plot_fit(fit, plot_file, title=f'sysid: {source}')
     return Identification(fit, realisation, error, parameter_file, report_file, plot_file)

@@ -109,3 +109,41 @@ class MultiSine(Segment):
         dds = -np.sum(a * w_k ** 2 * np.sin(angle), axis=-1)
         w, dw, ddw = (v[:, None] for v in self._window(t))
         return (self.start_rad + w * s, dw * s + w * ds, ddw * s + 2.0 * dw * ds + w * dds)
+
+
+class Join(Segment):
+    """A quintic per joint from (q0, q̇0, q̈0) to (q1, q̇1, q̈1) over ``duration_s``: rejoins a
+    motion from wherever the arm is."""
+
+    def __init__(self, start, end, duration_s):
+        self.duration_s = float(duration_s)
+        (q0, v0, a0), (q1, v1, a1) = ([np.asarray(v, float) for v in s] for s in (start, end))
+        self.start_rad, self.end_rad = q0, q1
+        t = self.duration_s
+        # q(s) = Σ c_k s^k; c0..c2 from the start, c3..c5 from the end's three conditions.
+        ends = np.array([[t ** 3, t ** 4, t ** 5],
+                         [3 * t ** 2, 4 * t ** 3, 5 * t ** 4],
+                         [6 * t, 12 * t ** 2, 20 * t ** 3]])
+        rest = np.array([q1 - (q0 + v0 * t + 0.5 * a0 * t ** 2), v1 - (v0 + a0 * t), a1 - a0])
+        self.coefficients = np.vstack([q0, v0, 0.5 * a0, np.linalg.solve(ends, rest)])
+
+    def sample(self, t):
+        s = np.clip(np.atleast_1d(t), 0.0, self.duration_s)[:, None]
+        c = self.coefficients
+        q = sum(c[k] * s ** k for k in range(6))
+        qd = sum(k * c[k] * s ** (k - 1) for k in range(1, 6))
+        qdd = sum(k * (k - 1) * c[k] * s ** (k - 2) for k in range(2, 6))
+        return q, qd, qdd
+
+
+class Tail(Segment):
+    """What is left of ``segment`` from ``from_s`` on."""
+
+    def __init__(self, segment, from_s):
+        self.segment, self.from_s = segment, float(from_s)
+        self.duration_s = segment.duration_s - self.from_s
+        self.start_rad = segment.sample(self.from_s)[0][0]
+        self.end_rad = segment.end_rad
+
+    def sample(self, t):
+        return self.segment.sample(np.atleast_1d(t) + self.from_s)

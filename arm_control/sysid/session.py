@@ -12,12 +12,16 @@ track where it matters most. If the stage-1 fit fails, stage 2 uses the robot fi
 the arm is held at the centre) and the in-process run (``simulated``).
 """
 
+from dataclasses import replace
+
 from arm_control.config import ArmConfig
 from arm_control.sysid.excitation import (design_excitation, DYNAMIC, ExcitationRun,
                                           MULTISINE, QUASISTATIC)
 from arm_control.sysid.fit import fit_log
+from arm_control.sysid.handover import holding, lowering
 from arm_control.sysid.log import Log
-from arm_control.sysid.regressor import RealisationError, realise, with_values
+from arm_control.sysid.quality import identified_values
+from arm_control.sysid.regressor import RealisationError, with_values
 from arm_control.sysid.settings import SysIdConfig
 
 
@@ -26,7 +30,7 @@ def provisional_model(log: Log, nominal: ArmConfig, settings: SysIdConfig):
     try:
         fit = fit_log(log, nominal, settings.smoothing_window_s, settings.max_command_lag_s,
                       settings.min_speed_rad_s)
-        return with_values(nominal, realise(fit.parameters, nominal).values), \
+        return with_values(nominal, identified_values(fit, nominal)[0].values), \
             'stage 2 designed and tracked with the stage-1 fit'
     except (ValueError, RealisationError) as error:
         return nominal, f'stage 2 designed and tracked with the robot file: stage 1 gave {error}'
@@ -53,10 +57,10 @@ class Session:
         """(q, q̇) the last command was computed for: the plan, logged as the instruments."""
         return self.run.reference
 
-    def command(self, now_s, position, velocity):
+    def command(self, now_s, position, velocity, bus_v=None):
         if self.began_s is None:
             self.began_s = now_s
-        return self.run.command(now_s, position, velocity)
+        return self.run.command(now_s, position, velocity, bus_v)
 
     def elapsed_s(self, now_s) -> float:
         """Arm time: since the first command."""
@@ -83,10 +87,32 @@ class Session:
             self.stage = 2
             return
         self.notes += notes
-        self.run = ExcitationRun(model, self.settings, excitation)
+        self._take(ExcitationRun(model, self.settings, excitation))
         self.stage = 2
+
+    def _take(self, run: ExcitationRun) -> None:
+        """Drive ``run`` from now on, keeping the list of stalls ridden through."""
+        run.stalls = self.run.stalls
+        self.run = run
+
+    @property
+    def stalls(self) -> list:
+        return self.run.stalls
 
     def finished(self, now_s) -> bool:
         if self.run.stopped is not None:
             return self.run.finished(now_s)
         return self.stage == 2 and self.run.finished(now_s)
+
+    def hold(self, model: ArmConfig, q) -> None:
+        """From now on hold the arm at ``q`` with ``model`` (after the excitation)."""
+        self._take(ExcitationRun(model, self.settings, holding(q)))
+        self.stage = 3
+
+    def lower(self, model: ArmConfig, q, rest) -> None:
+        """From now on lower the arm from ``q`` onto ``rest`` with ``model``; ValueError when
+        the way is not free. Forbidden space is watched without a margin: a rest may be
+        near it."""
+        self._take(ExcitationRun(model, replace(self.settings, margin_rad=0.0),
+                                 lowering(model, q, rest)))
+        self.stage = 3

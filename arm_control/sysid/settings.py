@@ -11,8 +11,13 @@ class SysIdConfig:
     """How the excitation moves the arm, how it is tracked, and how the log is fitted."""
 
     loop_rate_hz: float
+    realtime_priority: int
+    hand_over_timeout_s: float
+    rest_rad: tuple[float, float]
+    max_stall_s: float
     output_directory: str
     fit_only_bag: str
+    wpilog_entries: tuple[str, str, str, str]
     centre_rad: tuple[float, float]
     quasistatic_range_rad: tuple[float, float]
     quasistatic_acceleration_rad_s2: float
@@ -58,13 +63,25 @@ class SysIdConfig:
         if not 0.0 < band[0] < band[1]:
             raise ParameterError(f"parameter 'multisine_band_hz' = {list(band)}: "
                                  'expected [low, high] with 0 < low < high')
+        entries = params.get('wpilog_entries', ())
+        if (not isinstance(entries, (list, tuple)) or len(entries) != 4
+                or not all(isinstance(e, str) for e in entries) or not entries[0]
+                or not entries[2]):
+            raise ParameterError(f"parameter 'wpilog_entries' = {entries!r}: expected four "
+                                 'entry names [positions, velocities, applied volts, bus '
+                                 "volts], the first and third not ''")
         output_directory = text('output_directory')
         if not output_directory:
             raise ParameterError("parameter 'output_directory' is empty: expected a directory")
         return cls(
             loop_rate_hz=read.number('loop_rate_hz', low=0.0, high=1000.0, low_open=True),
+            realtime_priority=read.integer('realtime_priority', low=0, high=98),
+            hand_over_timeout_s=read.nonnegative('hand_over_timeout_s'),
+            rest_rad=read.numbers('rest_rad', 2),
+            max_stall_s=read.nonnegative('max_stall_s'),
             output_directory=output_directory,
             fit_only_bag=text('fit_only_bag'),
+            wpilog_entries=tuple(entries),
             centre_rad=read.numbers('centre_rad', 2),
             quasistatic_range_rad=nonnegative_pair('quasistatic_range_rad'),
             quasistatic_acceleration_rad_s2=read.positive('quasistatic_acceleration_rad_s2'),
