@@ -36,11 +36,11 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
-from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health
 from arm_control.control.latency import CommandDelay
+from arm_control.control.live_settings import changed_names, controller_settings, TUNABLE
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.nodes import messages, realtime
@@ -63,9 +63,6 @@ SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V comman
 # A reading is timed at its stamp when that is at most this long before its arrival, and
 # not after it (the stamp on this host's clock); else at its arrival.
 STAMP_TRUSTED_S = 0.05
-TUNABLE = ('shoulder_pid', 'elbow_pid', 'integrator_limit_v', 'feedback_voltage_reserve',
-           'driving_voltage_reserve', 'goal_tolerance_rad', 'settled_velocity_rad_s',
-           'dwell_s', 'presets.')
 # Goals are kept until taken: a burst (a script, a flood) is answered, not dropped.
 GOALS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 EVENTS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -80,9 +77,8 @@ class ControllerNode(Node):
         super().__init__('controller')
         self.core = None
         params = declare_parameters(self, 'controller', TUNABLE, self.on_parameters)
-        self.arm = ArmConfig.from_parameters(params)
-        self.config = ControllerConfig.from_parameters(params)
-        self.config.check_against(self.arm)
+        self.settings = controller_settings(params)         # as every change is checked
+        self.arm, self.config = self.settings.arm, self.settings.config
         self.lock = threading.Lock()                # the core, between the threads
         self.plans = PlanLink(self, self.arm, self.config, self.on_timed_plan)
         self.core = ArmController(self.arm, self.config)
@@ -237,25 +233,21 @@ class ControllerNode(Node):
         return response
 
     def on_parameters(self, params):
-        """A run-time change: validated whole, taken from the next period, or refused with
-        the reason (the old values kept)."""
+        """A run-time change: checked whole as at start (``controller_settings``), taken
+        from the next period, or refused with the reason (the old values kept)."""
         if self.core is None:
             return None                             # the overrides at start: read below
         try:
-            arm, config = ArmConfig.from_parameters(params), \
-                ControllerConfig.from_parameters(params)
-            config.check_against(arm)
+            settings = controller_settings(params)
         except ParameterError as error:
             return str(error)
-        changed = [name for name in TUNABLE if getattr(config, name, None) !=
-                   getattr(self.config, name, None)] + (
-            ['presets'] if arm.presets != self.arm.presets else [])
-        self.plans.retune(arm, config)
+        changed = changed_names(self.settings, settings)
+        self.plans.retune(settings.arm, settings.config)
         with self.lock:
-            self.core.retune(arm, config)
+            self.core.retune(settings.arm, settings.config, settings)
             self.core.events.say(self.core_now_s(), Kind.PARAMETERS, 'info',
                                  f'changed at run time: {", ".join(changed) or "nothing"}')
-        self.arm, self.config = arm, config
+        self.settings, self.arm, self.config = settings, settings.arm, settings.config
         self.outputs.trigger()
         return None
 
