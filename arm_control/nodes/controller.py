@@ -38,11 +38,12 @@ from std_srvs.srv import SetBool, Trigger
 
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
-from arm_control.control.health import diagnostics, health
+from arm_control.control.health import diagnostics, health, loop_values, trust_values
 from arm_control.control.latency import CommandDelay
 from arm_control.control.live_settings import changed_names, controller_settings, TUNABLE
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
+from arm_control.control.trust import GraphCounts, TrustWatch
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
                                       LATCHED, loop_statistics, PLANNER_AVAILABLE, run,
@@ -52,6 +53,7 @@ from arm_control.nodes.plan_link import PlanLink
 from arm_control.parameters import ParameterError
 
 PLANNER_POLL_S = 0.05             # how often to look whether the planner is there
+GRAPH_WATCH_S = 0.5               # how often to count who else publishes its topics
 # The executor's thread (messages, services) at SCHED_FIFO this low when the loop is at real
 # time: above every normal process, below the loop. At normal priority, a busy machine
 # preempts it while it holds Python's lock, and the loop waits for the lock: in a flood of
@@ -82,6 +84,7 @@ class ControllerNode(Node):
         self.lock = threading.Lock()                # the core, between the threads
         self.plans = PlanLink(self, self.arm, self.config, self.on_timed_plan)
         self.core = ArmController(self.arm, self.config)
+        self.trust = TrustWatch(self.core)
         # The latest reading for the loop, and the encoders and bus: (value, received at).
         self.reading = self.encoders = self.bus = None
         self.bad_inputs = self.bad_inputs_said = 0
@@ -116,6 +119,7 @@ class ControllerNode(Node):
         self.planner_ready = None
         self.create_timer(PLANNER_POLL_S, self.watch_planner)
         self.create_timer(1.0, self.publish_diagnostics)
+        self.create_timer(GRAPH_WATCH_S, self.watch_graph)
         priority = self.config.realtime_priority
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
                                 self.get_logger().warning, self.has_reading, self.plans.busy)
@@ -168,7 +172,7 @@ class ControllerNode(Node):
                                  f'within {top_speed:.0f} rad/s; got {len(msg.name)} names, '
                                  f'{len(msg.position)} positions, {len(msg.velocity)} '
                                  'velocities')
-        now, stamp = self.now_s(), messages.stamp_s(msg.header)
+        now, stamp = self.now_s(), self.loop.guard.to_control_s(messages.stamp_s(msg.header))
         age_s = now - stamp
         if math.isfinite(age_s):
             self.reading_ages_s.append(age_s)
@@ -182,8 +186,9 @@ class ControllerNode(Node):
         # the median) the estimate lagged the arm by that much motion, and the feedback drove
         # the elbow up to 1.5 deg ahead on a 0.2 s hop (past its goal in 5 of 24 runs, 40-60 ms
         # more to settle; 0 of 24 at the stamps). In simulated time the stamp is the clock's,
-        # which may not have reached it yet.
-        trusted = 0.0 <= age_s <= STAMP_TRUSTED_S or self.loop.simulated()
+        # which may not have reached it yet, or have jumped since.
+        trusted = 0.0 <= age_s <= STAMP_TRUSTED_S or (
+            self.loop.simulated() and abs(age_s) <= self.config.joint_state_timeout_s)
         taken = stamp if trusted else now
         self.reading = (SensorReading(tuple(position), tuple(velocity), tuple(encoder),
                                       stamp, bus, supply_current), taken)
@@ -254,7 +259,7 @@ class ControllerNode(Node):
     def has_reading(self, now_s: float) -> bool:
         """The joint states of ``now_s`` (simulated time: the sim's step) are in."""
         reading = self.reading
-        return reading is not None and reading[0].sampled_s >= now_s - 1e-6
+        return reading is not None and reading[1] >= now_s - 1e-6
 
     def watch_planner(self) -> None:
         """Tell the core when the planner (and the timing worker) comes or goes; with no
@@ -269,6 +274,20 @@ class ControllerNode(Node):
             moving = self.core.state in (ArmState.PLANNING, ArmState.TRACKING, ArmState.DRIVER)
         self.plans.let_keeper_work(idle and not moving)
         self.plans.keep_presets(idle)
+
+    @guarded
+    def watch_graph(self) -> None:
+        """Who else publishes what the controller reads or writes, or takes its name
+        (``TrustWatch``)."""
+        counts = GraphCounts(
+            self.count_publishers('joint_states'),
+            self.count_publishers('/clock') if self.loop.simulated() else 0,
+            self.count_publishers('voltage_command'),
+            self.get_node_names_and_namespaces().count((self.get_name(),
+                                                        self.get_namespace())))
+        with self.lock:
+            self.trust.graph(self.core_now_s(), counts)
+        self.outputs.trigger()
 
     def warn_bad(self, message: str) -> None:
         self.bad_inputs += 1
@@ -287,6 +306,7 @@ class ControllerNode(Node):
                 self.core.estop(acts_s, f'internal error in the control step: {error!r}',
                                 cut_power=True)
                 voltage = np.zeros(2)
+            self.trust.step(acts_s, self.loop.guard.take())
             estimate, setpoint = self.core.estimate, self.core.setpoint
             said = (self.core.events.waiting or self.core.goals.plans.waiting
                     or self.core.state != self.last_state
@@ -355,19 +375,12 @@ class ControllerNode(Node):
             (malformed, f'{malformed} malformed messages ignored (the log says which)')) if bad]
         with self.lock:
             values, planner = diagnostics(self.core, self.now_s()), self.core.planner_available
-            level, message = health(self.core, stats['worst'], problems)
-        values.update({
-            'loop period mean (s)': f'{stats["mean"]:.4f}',
-            'loop period worst (s)': f'{stats["worst"]:.4f}',
-            'compute per cycle median (ms)': f'{1000 * stats["compute median"]:.3f}',
-            'compute per cycle worst (ms)': f'{1000 * stats["compute worst"]:.3f}',
-            # On one clock (one host, or sim time): how late the readings come to the loop.
-            'joint_states age worst (ms)': f'{1000 * max(ages, default=math.nan):.1f}',
-            'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner),
-            'trajectories kept': self.plans.worker.kept,
-            'loop scheduling': self.loop.priority_problem or (
-                f'SCHED_FIFO {self.loop.realtime_priority}' if self.loop.realtime_priority
-                else 'normal')})
+            level, message = health(self.core, stats['worst'], problems,
+                                    self.trust.problems.values())
+            values.update(trust_values(self.trust))
+        values.update(loop_values(stats, ages, self.loop))
+        values.update({'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner),
+                       'trajectories kept': self.plans.worker.kept})
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()
         diagnostic.status = [status(self, LEVELS[level], message, values)]
