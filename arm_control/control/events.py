@@ -46,7 +46,6 @@ class EventKind(str, Enum):
     UNTRUSTED = 'untrusted'                    # an input it cannot trust (cause: which)
     TRUSTED = 'trusted'                        # ... trusted again
     SENSORS_DISAGREE = 'sensors_disagree'      # a reading refused: the others say otherwise
-    INPUTS_DROPPED = 'inputs_dropped'          # a window's inputs dropped in a flood, counted
 
     def __str__(self) -> str:
         return self.value

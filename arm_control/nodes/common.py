@@ -160,6 +160,17 @@ def guarded(callback):
     return wrapper
 
 
+def log_at(logger, level: str, text: str) -> None:
+    """``text`` at 'info', 'warning' or else error severity (rclpy ties a severity to its
+    call site, so each has its own)."""
+    if level == 'info':
+        logger.info(text)
+    elif level == 'warning':
+        logger.warning(text)
+    else:
+        logger.error(text)
+
+
 def loop_statistics(periods_s, compute_s) -> dict:
     """Mean and worst of a loop's periods, median and worst of its compute times (s)."""
     return {'mean': statistics.fmean(periods_s) if periods_s else math.nan,

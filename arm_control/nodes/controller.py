@@ -39,6 +39,7 @@ from std_srvs.srv import SetBool, Trigger
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health, loop_values, trust_values
+from arm_control.control.input_gate import InputGate
 from arm_control.control.latency import CommandDelay
 from arm_control.control.live_settings import changed_names, controller_settings, TUNABLE
 from arm_control.control.sensing import SensorReading
@@ -46,8 +47,8 @@ from arm_control.control.state_machine import ArmState
 from arm_control.control.trust import GraphCounts, TrustWatch
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
-                                      LATCHED, loop_statistics, PLANNER_AVAILABLE, run,
-                                      STATE_STREAM, status)
+                                      LATCHED, log_at, loop_statistics, PLANNER_AVAILABLE,
+                                      run, STATE_STREAM, status)
 from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.plan_link import PlanLink
 from arm_control.parameters import ParameterError
@@ -65,7 +66,7 @@ SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V comman
 # A reading is timed at its stamp when that is at most this long before its arrival, and
 # not after it (the stamp on this host's clock); else at its arrival.
 STAMP_TRUSTED_S = 0.05
-# Goals are kept until taken: a burst (a script, a flood) is answered, not dropped.
+# Goals, presets, driver commands kept until taken: answered or counted (``InputGate``).
 GOALS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 EVENTS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 MAX_ANGLE_RAD = 4.0 * math.pi     # no sensor of this arm reads beyond two turns
@@ -84,7 +85,7 @@ class ControllerNode(Node):
         self.lock = threading.Lock()                # the core, between the threads
         self.plans = PlanLink(self, self.arm, self.config, self.on_timed_plan)
         self.core = ArmController(self.arm, self.config)
-        self.trust = TrustWatch(self.core)
+        self.trust, self.gate = TrustWatch(self.core), InputGate()
         # The latest reading for the loop, and the encoders and bus: (value, received at).
         self.reading = self.encoders = self.bus = None
         self.bad_inputs = self.bad_inputs_said = 0
@@ -106,8 +107,8 @@ class ControllerNode(Node):
                 ('motor_encoders', JointState, self.on_encoders, STATE_STREAM),
                 ('battery_state', BatteryState, self.on_battery, STATE_STREAM),
                 ('goal_point', PointStamped, self.on_goal_point, GOALS),
-                ('goal_preset', String, self.on_goal_preset, COMMANDS),
-                ('driver_velocity', TwistStamped, self.on_driver, COMMANDS)):
+                ('goal_preset', String, self.on_goal_preset, GOALS),
+                ('driver_velocity', TwistStamped, self.on_driver, GOALS)):
             self.create_subscription(kind, topic, handler, qos)
         for name, call in (('~/estop', self.core.estop), ('~/reset', self.core.reset),
                            ('~/cancel', self.core.cancel)):
@@ -162,16 +163,11 @@ class ControllerNode(Node):
     def on_joint_states(self, msg: JointState) -> None:
         if not self.loop.started():
             return                                  # the sim's clock is not there yet
-        position = messages.joint_pair(msg, 'position')
-        velocity = messages.joint_pair(msg, 'velocity') or [math.nan, math.nan]
-        top_speed = self.core.sensing.max_leap_speed_rad_s       # beyond what motors give
-        if position is None or not messages.within(position, MAX_ANGLE_RAD) or \
-                not messages.within([v for v in velocity if not math.isnan(v)], top_speed):
-            return self.warn_bad(f'ignored joint_states: expected finite positions of '
-                                 f'[shoulder, elbow] within two turns and velocities, if any, '
-                                 f'within {top_speed:.0f} rad/s; got {len(msg.name)} names, '
-                                 f'{len(msg.position)} positions, {len(msg.velocity)} '
-                                 'velocities')
+        # Velocities beyond what the motors could give are no reading of this arm.
+        pair = messages.joint_readings(msg, MAX_ANGLE_RAD, self.core.sensing.max_leap_speed_rad_s)
+        if isinstance(pair, str):
+            return self.warn_bad(f'ignored joint_states: {pair}')
+        position, velocity = pair
         now, stamp = self.now_s(), self.loop.guard.to_control_s(messages.stamp_s(msg.header))
         age_s = now - stamp
         if math.isfinite(age_s):
@@ -210,23 +206,27 @@ class ControllerNode(Node):
 
     @guarded
     def on_goal_point(self, msg: PointStamped) -> None:
-        if not self.refused(msg.header.frame_id, 'frame_id', 'goal'):
+        if not self.refused('goal_point', msg.header.frame_id, 'frame_id', 'goal'):
             p = msg.point
             self.command(self.core.submit_goal, p.x, p.y, p.z, msg.header.frame_id)
 
     @guarded
     def on_goal_preset(self, msg: String) -> None:
-        if not self.refused(msg.data, 'preset name', 'preset'):
+        if not self.refused('goal_preset', msg.data, 'preset name', 'preset'):
             self.command(self.core.submit_preset, msg.data.strip())
 
     @guarded
     def on_driver(self, msg: TwistStamped) -> None:
-        if not self.refused(msg.header.frame_id, 'frame_id', 'driver command'):
+        if not self.refused('driver_velocity', msg.header.frame_id, 'frame_id',
+                            'driver command'):
             linear = msg.twist.linear
             self.command(self.core.driver_command, linear.x, linear.y, msg.header.frame_id)
 
-    def refused(self, text: str, what: str, whose: str) -> bool:
-        """Text too long to be a name is refused before anything formats it."""
+    def refused(self, topic: str, text: str, what: str, whose: str) -> bool:
+        """An input beyond its topic's rate is dropped and counted (``InputGate``); text too
+        long to be a name is refused before anything formats it."""
+        if not self.gate.admit(topic, time.monotonic()):
+            return True
         problem = messages.name_problem(text, what)
         if problem:
             self.command(self.core.goals.reject, f'{whose} rejected: {problem}', 'oversized')
@@ -277,14 +277,11 @@ class ControllerNode(Node):
 
     @guarded
     def watch_graph(self) -> None:
-        """Who else publishes what the controller reads or writes, or takes its name
-        (``TrustWatch``)."""
-        counts = GraphCounts(
-            self.count_publishers('joint_states'),
-            self.count_publishers('/clock') if self.loop.simulated() else 0,
-            self.count_publishers('voltage_command'),
-            self.get_node_names_and_namespaces().count((self.get_name(),
-                                                        self.get_namespace())))
+        """Who else publishes what it reads or writes, or takes its name (``TrustWatch``)."""
+        me = (self.get_name(), self.get_namespace())
+        counts = GraphCounts(*(self.count_publishers(topic) if topic else 0 for topic in (
+            'joint_states', '/clock' if self.loop.simulated() else '', 'voltage_command')),
+            self.get_node_names_and_namespaces().count(me))
         with self.lock:
             self.trust.graph(self.core_now_s(), counts)
         self.outputs.trigger()
@@ -341,15 +338,9 @@ class ControllerNode(Node):
             state, pending = self.core.state, self.core.pending_goals()
             version = self.core.goals.queue.version
             requests = self.core.take_plan_requests()
-        log = self.get_logger()
         for event in events:
             self.events_pub.publish(String(data=str(event)))
-            if event.level == 'info':           # rclpy ties a severity to its call site
-                log.info(str(event))
-            elif event.level == 'warning':
-                log.warning(str(event))
-            else:
-                log.error(str(event))
+            log_at(self.get_logger(), event.level, str(event))
         if state != self.last_state:
             self.last_state = state
             self.state_pub.publish(String(data=str(state)))
@@ -374,13 +365,15 @@ class ControllerNode(Node):
             (not self.plans.worker.alive, 'the plan worker process is gone: goals will fail'),
             (malformed, f'{malformed} malformed messages ignored (the log says which)')) if bad]
         with self.lock:
+            self.gate.flush(self.core, self.core_now_s(), time.monotonic())
             values, planner = diagnostics(self.core, self.now_s()), self.core.planner_available
             level, message = health(self.core, stats['worst'], problems,
                                     self.trust.problems.values())
             values.update(trust_values(self.trust))
         values.update(loop_values(stats, ages, self.loop))
         values.update({'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner),
-                       'trajectories kept': self.plans.worker.kept})
+                       'trajectories kept': self.plans.worker.kept,
+                       **{f'{kind} dropped': n for kind, n in self.gate.dropped.items()}})
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()
         diagnostic.status = [status(self, LEVELS[level], message, values)]
