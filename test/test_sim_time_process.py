@@ -74,7 +74,7 @@ def test_the_nodes_follow_the_sims_clock_faster_than_real_time(launch, probe, ar
 @pytest.mark.parametrize('jump_s', [100.0, -10.0])
 def test_a_rogue_clock_mid_move_is_taken_out_and_the_arm_goes_on(launch, probe, arm, jump_s):
     """One /clock 100 s ahead (or 10 s back) from another node while the arm moves: the
-    controller says the jump, keeps commanding, and the goal is reached above the floor."""
+    controller keeps commanding, and the goal is reached above the floor."""
     launch('sim', '-p', 'sim_time_factor:=1.0')
     for name in ('planner', 'controller'):
         launch(name, '-p', 'use_sim_time:=true')
@@ -94,9 +94,9 @@ def test_a_rogue_clock_mid_move_is_taken_out_and_the_arm_goes_on(launch, probe, 
     assert probe.spin_until(ready, 30.0), [s.data for s in states]
     rogue = probe.node.create_publisher(Clock, '/clock', 10)
     send = goal_publisher(probe)
-    send(1.1, 0.9)
+    send(-1.0, 1.0)                                   # over the top: about a second
     assert probe.spin_until(lambda: states[-1].data == 'tracking', 10.0)
-    probe.spin_for(0.3)
+    probe.spin_for(0.1)
     began = time.monotonic()
     now = clock[-1].clock
     rogue.publish(Clock(clock=type(now)(sec=now.sec + int(jump_s), nanosec=now.nanosec)))
@@ -107,6 +107,8 @@ def test_a_rogue_clock_mid_move_is_taken_out_and_the_arm_goes_on(launch, probe, 
     q = np.array([m.position for m in truth])
     print(f'/clock {jump_s:+g} s: voltage_command worst gap {1000 * gaps_s.max():.0f} ms after '
           f'it; events {kinds}')
-    assert 'clock_jumped' in kinds and 'sensors_lost' not in kinds
+    # The second publisher of /clock is named; its message, heard before the sim's next (a
+    # race: the clock may be overridden again before the loop reads it), is a jump.
+    assert 'untrusted' in kinds and 'sensors_lost' not in kinds
     assert gaps_s.max() < 0.25
     assert np.min(ForbiddenSpace(arm).lowest_point_m(q)) >= 0.0

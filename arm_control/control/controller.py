@@ -239,14 +239,18 @@ class ArmController:
 
     # ------------------------------------------------------------------ the control period
 
-    def step(self, now_s: float, reading=None, reading_time_s: Optional[float] = None):
+    def step(self, now_s: float, reading=None, reading_time_s: Optional[float] = None,
+             earlier=()):
         """One control period: returns [Va, Vb] to apply until the next one.
 
         ``reading``: the sensors' latest sample since the last step (a ``SensorReading``, or
-        a plant's Reading), else None; ``reading_time_s``: when it was taken (default now).
+        a plant's Reading), else None; ``reading_time_s``: when it was taken (default now);
+        ``earlier``: (reading, time) of those before it since the last step, folded in first.
         """
         dt_s = self.period_s if self.last_step_s is None else max(now_s - self.last_step_s, 0.0)
         self.last_step_s = now_s
+        for earlier_reading, earlier_s in earlier:
+            self.sensing.update(now_s, earlier_reading, earlier_s, self.voltage)
         self.sensing.update(now_s, reading, reading_time_s, self.voltage)
         self._supervise(now_s)
         pending = self.goals.plans.pending

@@ -106,9 +106,10 @@ class ControlLoop:
                 self._wake.wait(SIM_TIME_POLL_S)
                 continue
             poked = self._wake.is_set()
-            # Across a jump of the clock control time stood still: its step is answered now.
-            jumped, jumps_seen = self.guard.jumps != jumps_seen, self.guard.jumps
-            due = now >= due_s - DUE_SLACK_S or jumped
+            if self.guard.jumps != jumps_seen:
+                # Across a jump of the clock control time stood still: its step is due now.
+                jumps_seen, due_s = self.guard.jumps, now
+            due = now >= due_s - DUE_SLACK_S
             if not poked and due and self.simulated():
                 waiting_since = wall if waiting_since is None else waiting_since
                 starved = not self.has_input(now) and wall - waiting_since < SIM_INPUT_WAIT_S

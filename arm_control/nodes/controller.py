@@ -66,6 +66,7 @@ SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V comman
 # A reading is timed at its stamp when that is at most this long before its arrival, and
 # not after it (the stamp on this host's clock); else at its arrival.
 STAMP_TRUSTED_S = 0.05
+READINGS_KEPT = 4                 # joint_states kept for the next tick, the latest last
 # Goals, presets, driver commands kept until taken: answered or counted (``InputGate``).
 GOALS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 EVENTS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -87,7 +88,7 @@ class ControllerNode(Node):
         self.core = ArmController(self.arm, self.config)
         self.trust, self.gate = TrustWatch(self.core), InputGate()
         # The latest reading for the loop, and the encoders and bus: (value, received at).
-        self.reading = self.encoders = self.bus = None
+        self.readings, self.encoders, self.bus = [], None, None
         self.bad_inputs = self.bad_inputs_said = 0
         self.last_state = self.last_queue_version = None
         self.loop_periods_s, self.loop_compute_s, self.last_tick_s = [], [], None
@@ -186,8 +187,9 @@ class ControllerNode(Node):
         trusted = 0.0 <= age_s <= STAMP_TRUSTED_S or (
             self.loop.simulated() and abs(age_s) <= self.config.joint_state_timeout_s)
         taken = stamp if trusted else now
-        self.reading = (SensorReading(tuple(position), tuple(velocity), tuple(encoder),
-                                      stamp, bus, supply_current), taken)
+        # All since the last tick: beside a second publisher the latest was often its.
+        self.readings = self.readings[-(READINGS_KEPT - 1):] + [(SensorReading(
+            tuple(position), tuple(velocity), tuple(encoder), stamp, bus, supply_current), taken)]
 
     @guarded
     def on_encoders(self, msg: JointState) -> None:
@@ -258,8 +260,7 @@ class ControllerNode(Node):
 
     def has_reading(self, now_s: float) -> bool:
         """The joint states of ``now_s`` (simulated time: the sim's step) are in."""
-        reading = self.reading
-        return reading is not None and reading[1] >= now_s - 1e-6
+        return any(taken >= now_s - 1e-6 for _, taken in self.readings)
 
     def watch_planner(self) -> None:
         """Tell the core when the planner (and the timing worker) comes or goes; with no
@@ -295,10 +296,11 @@ class ControllerNode(Node):
     def tick(self) -> None:
         began, now = time.perf_counter(), self.now_s()
         acts_s = now + self.lag_s()
-        reading, self.reading = self.reading, None
+        readings, self.readings = self.readings, []
         with self.lock:
             try:
-                voltage = self.core.step(acts_s, *(reading or (None, None)))
+                voltage = self.core.step(acts_s, *(readings[-1] if readings else (None, None)),
+                                         earlier=readings[:-1])
             except Exception as error:              # a bug must stop the arm, not the node
                 self.core.estop(acts_s, f'internal error in the control step: {error!r}',
                                 cut_power=True)
