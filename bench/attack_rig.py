@@ -175,8 +175,6 @@ class Bench:
         self.reset = node.create_client(Trigger, '/controller/reset')
         self.cancel = node.create_client(Trigger, '/controller/cancel')
         self.parameters = node.create_client(SetParameters, '/controller/set_parameters')
-        self.rogue_states = node.create_publisher(JointState, '/joint_states', DEEP)
-        self.rogue_clock = node.create_publisher(Clock, '/clock', DEEP)
         self.children = []              # processes started by attacks, stopped at the end
         self.fresh_next = False         # the next attack needs the nodes started afresh
 

@@ -255,6 +255,7 @@ ATTACKS = {
 def run_attack(b: Bench, name: str) -> dict:
     print(f'== {name}', file=sys.stderr, flush=True)
     try:
+        attacks_live.before(b, name)    # the clock's attacks: in simulated time
         b.prepare()
     except Exception as error:
         return dict(attack=name, done='not run', notes=f'the arm could not be prepared: '

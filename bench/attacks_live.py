@@ -14,6 +14,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from arm_control.control.events import parse_event
+from arm_control.nodes.common import STATE_STREAM
 
 ROGUE_OFFSET_RAD = math.radians(-20.0)      # the second joint_states: shoulder 20 deg low
 ROGUE_RATE_HZ = 50.0
@@ -93,6 +94,7 @@ def second_joint_states(b: Bench) -> dict:
     b.wait_until(lambda: b.heard.said(since, 'goal_reached'), 15.0)
     began = time.time()
     node, sent = b.rig.probe.node, 0
+    rogue = node.create_publisher(JointState, '/joint_states', STATE_STREAM)
     while time.time() - began < b.seconds:
         if b.heard.truth:
             _, shoulder, elbow = b.heard.truth[-1]
@@ -100,9 +102,10 @@ def second_joint_states(b: Bench) -> dict:
                                  position=[shoulder + ROGUE_OFFSET_RAD, elbow],
                                  velocity=[0.0, 0.0])
             message.header.stamp = node.get_clock().now().to_msg()
-            b.rogue_states.publish(message)
+            rogue.publish(message)
             sent += 1
         b.wait_until(lambda: False, 1.0 / ROGUE_RATE_HZ)
+    node.destroy_publisher(rogue)
     b.wait(1.0)
     return dict(done=f'a second publisher of joint_states at {ROGUE_RATE_HZ:g} Hz, the shoulder '
                      f'{math.degrees(ROGUE_OFFSET_RAD):+.0f} deg off, at floor_pickup '
@@ -115,12 +118,15 @@ def second_controller(b: Bench) -> dict:
     log_dir.mkdir(parents=True, exist_ok=True)
     twin = NodeProcess('controller', b.rig.domain, (), log_dir)
     try:
+        up = b.wait_until(lambda: b.rig.probe.node.count_publishers('/voltage_command') > 1,
+                          30.0)
         b.wait(b.seconds)
     finally:
         twin.stop()
     b.wait(1.0)
     b.fresh_next = True                 # the two controllers' states are mixed on arm_state
-    return dict(done='a second controller started beside the first for the attack',
+    return dict(done='a second controller started beside the first, on for '
+                     f'{b.seconds:g} s once up' + ('' if up else ' (never seen up)'),
                 notes=f'{said_of(b, began)}; {alive(b)}')
 
 
@@ -143,25 +149,31 @@ def flood_all(b: Bench) -> dict:
                       f'{dropped or "no diagnostics"}; {alive(b)}')
 
 
-def in_simulated_time(b: Bench) -> None:
-    if b.rig.node_args != SIM_TIME:
-        b.rig.node_args = dict(SIM_TIME)
-        b.restart_all()
+def before(b: Bench, name: str) -> None:
+    """Before ``name`` is prepared: the nodes started afresh in simulated time for the
+    clock's attacks, in real time for the others."""
+    wanted = SIM_TIME if name in ('clock_ahead', 'clock_back') else {}
+    if b.rig.node_args != wanted:
+        b.rig.node_args = dict(wanted)
+        b.fresh_next = True
 
 
 def clock_jump(b: Bench, jump_s: float) -> dict:
-    in_simulated_time(b)
+    node = b.rig.probe.node
+    publisher = node.create_publisher(Clock, '/clock', 10)
+    b.wait_until(lambda: publisher.get_subscription_count() > 1, 10.0)   # planner, controller
     since = time.time()
-    moving = moving_to(b, *PRESETS['mid_score'])
+    moving = moving_to(b, *PRESETS['back_score'])                         # over the top
     clock = b.heard.clock
     if clock is not None:
         rogue = type(clock)(sec=max(0, clock.sec + int(jump_s)), nanosec=clock.nanosec)
-        b.rogue_clock.publish(Clock(clock=rogue))
+        publisher.publish(Clock(clock=rogue))
     b.wait_until(lambda: b.heard.said(since, 'goal_reached'), b.seconds)
     b.wait(b.seconds / 2)
+    node.destroy_publisher(publisher)
     reached = bool(b.heard.said(since, 'goal_reached'))
-    return dict(done=f'in simulated time, one /clock {jump_s:+g} s during a move to mid_score'
-                     + ('' if moving else ' (the move was not seen to start)'),
+    return dict(done=f'in simulated time (1x), one /clock {jump_s:+g} s during a move to '
+                     'back_score' + ('' if moving else ' (the move was not seen to start)'),
                 notes=f'{"reached" if reached else "NOT reached"}; {said_of(b, since)}; '
                       f'{alive(b)}')
 
