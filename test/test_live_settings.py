@@ -48,8 +48,11 @@ def test_a_combination_the_loop_cannot_take_is_refused_with_the_parameter_named(
 
 def test_a_change_names_what_changed(params):
     old = controller_settings(params)
-    new = controller_settings(with_values(params, dwell_s=0.5, presets__stow=[0.3, 0.4]))
+    new = controller_settings(with_values(params, dwell_s=0.5, presets__stow=[0.3, 0.4]), old)
     assert changed_names(old, new) == ['dwell_s', 'presets']
+    assert new.max_acceleration_rad_s2 is old.max_acceleration_rad_s2        # kept as found
+    braking = controller_settings(with_values(params, feedback_voltage_reserve=1.0), old)
+    assert np.all(braking.max_acceleration_rad_s2 < old.max_acceleration_rad_s2)
 
 
 def instability_scales(arm, config):

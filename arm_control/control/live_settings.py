@@ -8,7 +8,7 @@ surely give for braking and holds (``sure_limits``: positive and finite), the ga
 what the loop holds at its rate and delay (``gain_limits``), and the presets' moves.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 from typing import Any, Mapping
 
@@ -40,14 +40,20 @@ class ControllerSettings:
     max_acceleration_rad_s2: np.ndarray
 
 
-def controller_settings(params: Mapping[str, Any]) -> ControllerSettings:
+def controller_settings(params: Mapping[str, Any], previous=None) -> ControllerSettings:
     """The controller's settings from its parameters, or ``ParameterError`` naming the one
-    that cannot be taken and why."""
+    that cannot be taken and why. ``previous``: the settings in force, whose sure limits
+    are kept when nothing they depend on changed (finding them takes a tenth of a second
+    of the executor, whose readings the loop then lacks)."""
     arm = ArmConfig.from_parameters(params)
     config = ControllerConfig.from_parameters(params)
     config.check_against(arm)
     timer = PlanTimer(arm, config)
-    speed, acceleration = sure_limits(timer.dynamics, timer.forbidden, arm, config)
+    if previous is not None and _limits_inputs(previous.arm, previous.config) == \
+            _limits_inputs(arm, config):
+        speed, acceleration = previous.max_velocity_rad_s, previous.max_acceleration_rad_s2
+    else:
+        speed, acceleration = sure_limits(timer.dynamics, timer.forbidden, arm, config)
     for name, values in (('max_velocity_rad_s', speed), ('max_acceleration_rad_s2',
                                                          acceleration)):
         if not all(math.isfinite(v) and v > 0.0 for v in values):
@@ -66,6 +72,13 @@ def controller_settings(params: Mapping[str, Any]) -> ControllerSettings:
             raise ParameterError(f"parameter 'presets.{name}' = {[x_m, y_m]}: {error}") from None
     preset_pairs(validator)
     return ControllerSettings(arm, config, timer, speed, acceleration)
+
+
+def _limits_inputs(arm: ArmConfig, config: ControllerConfig) -> tuple:
+    """What ``sure_limits`` depends on: the arm but its presets, the reserves and caps."""
+    return (replace(arm, presets=()), config.driving_voltage_reserve,
+            config.feedback_voltage_reserve, config.max_velocity_rad_s,
+            config.max_acceleration_rad_s2)
 
 
 def changed_names(old: ControllerSettings, new: ControllerSettings) -> list:

@@ -245,7 +245,7 @@ class ControllerNode(Node):
         if self.core is None:
             return None                             # the overrides at start: read below
         try:
-            settings = controller_settings(params)
+            settings = controller_settings(params, self.settings)
         except ParameterError as error:
             return str(error)
         changed = changed_names(self.settings, settings)
