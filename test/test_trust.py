@@ -155,3 +155,13 @@ def test_each_count_above_one_is_named_once_and_its_end_said():
     assert said == [(Kind.UNTRUSTED, 'voltage_command'), (Kind.UNTRUSTED, 'node name'),
                     (Kind.TRUSTED, 'voltage_command')]
     assert watch.level == 'error' and not Core.sensing.refuse_leaps
+
+
+def test_each_jump_of_the_clock_is_said(arm, controller_config):
+    rig = Rig(arm, controller_config)
+    watch = TrustWatch(rig.core)
+    rig.run(0.2)
+    watch.step(rig.now, [100.02, -99.98])
+    said = [e for e in rig.core.events.history if e.kind == Kind.CLOCK_JUMPED]
+    assert len(said) == 2 and watch.clock_jumps == 2
+    assert rig.core.state == ArmState.WAITING                  # nothing else changes
