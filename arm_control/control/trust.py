@@ -8,7 +8,9 @@ any topic and take any node name. So the controller watches for what it cannot t
   and another node of its own name: an ``untrusted`` event (cause: the topic or the name),
   at error level, and ``trusted`` when it ends. While joint_states has another publisher,
   a reading that leaps away from the estimate is refused (``Sensing.refuse_leaps``): the arm
-  is held where the trusted estimate says, not re-held where the leap says;
+  is held where the trusted estimate says, not re-held where the leap says. (The node also
+  sets it as each reading comes: DDS matches a publisher before its first message arrives,
+  so the first leap is already refused, before the graph is next watched);
 - readings that disagree with each other or with physics: a leap of the potentiometers no
   motor could make, where the encoders say the arm did not move, is refused
   (``Sensing._refused``) and said as ``sensors_disagree`` -- the first at once, then a count

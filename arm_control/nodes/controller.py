@@ -164,7 +164,7 @@ class ControllerNode(Node):
     def on_joint_states(self, msg: JointState) -> None:
         if not self.loop.started():
             return                                  # the sim's clock is not there yet
-        # Velocities beyond what the motors could give are no reading of this arm.
+        self.core.sensing.refuse_leaps |= self.count_publishers('joint_states') > 1
         pair = messages.joint_readings(msg, MAX_ANGLE_RAD, self.core.sensing.max_leap_speed_rad_s)
         if isinstance(pair, str):
             return self.warn_bad(f'ignored joint_states: {pair}')
