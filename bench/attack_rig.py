@@ -13,13 +13,16 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent / 'test'), str(HERE)]
 
 from arm_rig import ArmRig, flood_goals, point, START_Q  # noqa: E402
-from geometry_msgs.msg import PointStamped  # noqa: E402
+from geometry_msgs.msg import PointStamped, TwistStamped  # noqa: E402
 import numpy as np  # noqa: E402
+from rcl_interfaces.srv import SetParameters  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.duration import Duration  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from ros_harness import ros_environment  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
@@ -29,6 +32,7 @@ from arm_control.control.events import parse_event  # noqa: E402
 from arm_control.nodes.common import COMMANDS, LATCHED  # noqa: E402
 
 ARM, SIM = config.load('sim')
+CONTROLLER = config.load('controller')[1]
 PRESETS = {name: (x, y) for name, x, y in ARM.presets}
 NOT_COMMANDING = ('no_sensors', 'estopped', 'disabled')
 BIG = 10 * 1024 * 1024                  # the oversized text, 10 MB
@@ -80,6 +84,8 @@ class Listener:
         self.states = []                # (t, arm_state)
         self.events = []                # (t, kind, goals it answers, text)
         self.arm2_state = ''
+        self.clock = None               # the last /clock heard (simulated time)
+        node.create_subscription(Clock, '/clock', self.on_clock, DEEP)
         node.create_subscription(Float64MultiArray, '/voltage_command', self.on_voltage, DEEP)
         node.create_subscription(JointState, '/sim/ground_truth', self.on_truth, DEEP)
         node.create_subscription(String, '/arm_state', self.on_state, DEEP_LATCHED)
@@ -101,6 +107,9 @@ class Listener:
         kind, _, sentence = parse_event(msg.data)
         answered = int(sentence.split()[0]) if kind == SUMMARY else int(kind in ANSWERS)
         self.events.append((arrival_s(info), kind, answered, short(msg.data)))
+
+    def on_clock(self, msg):
+        self.clock = msg.clock
 
     def on_arm2_state(self, msg):
         self.arm2_state = msg.data
@@ -165,6 +174,7 @@ class Bench:
         self.estop = node.create_client(Trigger, '/controller/estop')
         self.reset = node.create_client(Trigger, '/controller/reset')
         self.cancel = node.create_client(Trigger, '/controller/cancel')
+        self.parameters = node.create_client(SetParameters, '/controller/set_parameters')
         self.children = []              # processes started by attacks, stopped at the end
         self.fresh_next = False         # the next attack needs the nodes started afresh
 
@@ -202,6 +212,25 @@ class Bench:
             client.remove_pending_request(future)
             return None
         return future.result()
+
+    def set_parameters(self, timeout_s: float = 5.0, **values) -> list:
+        """``ros2 param set /controller`` each of ``values`` (dots as '__'), one by one: the
+        (successful, reason) of each, or None where the call went unanswered."""
+        client = self.parameters
+        if not self.wait_until(client.service_is_ready, timeout_s):
+            return [None] * len(values)
+        results = []
+        for name, value in values.items():
+            request = SetParameters.Request(parameters=[
+                Parameter(name.replace('__', '.'), value=value).to_parameter_msg()])
+            future = client.call_async(request)
+            if not self.wait_until(future.done, timeout_s):
+                client.remove_pending_request(future)
+                results.append(None)
+                continue
+            result = future.result().results[0]
+            results.append((result.successful, result.reason))
+        return results
 
     def publish(self, publisher, message, match_timeout_s: float = 5.0) -> None:
         self.wait_until(lambda: publisher.get_subscription_count() > 0, match_timeout_s)
@@ -287,6 +316,36 @@ def flood_child(domain: int, count: int) -> None:
     rclpy.try_shutdown(context=context)
 
 
+def flood_all_child(domain: int, rate_hz: float, seconds: float) -> None:
+    """goal_point, goal_preset and driver_velocity, each at ``rate_hz`` for ``seconds``,
+    from publishers as a user's (reliable, depth 10), good and bad goals in turn."""
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node('attack_flood_all', context=context)
+    goals = node.create_publisher(PointStamped, '/goal_point', COMMANDS)
+    presets = node.create_publisher(String, '/goal_preset', COMMANDS)
+    driver = node.create_publisher(TwistStamped, '/driver_velocity', COMMANDS)
+    deadline = time.monotonic() + 10.0
+    while min(p.get_subscription_count() for p in (goals, presets, driver)) == 0 and \
+            time.monotonic() < deadline:
+        time.sleep(0.05)
+    points = [point(**goal) for goal in flood_goals()]
+    names = list(PRESETS) + ['no_such_preset']
+    twist = TwistStamped()
+    twist.header.frame_id = 'arm_base'
+    began, sent = time.monotonic(), 0
+    while time.monotonic() - began < seconds:
+        goals.publish(points[sent % len(points)])
+        presets.publish(String(data=names[sent % len(names)]))
+        twist.twist.linear.x = 0.2 * math.sin(sent / 50.0)
+        driver.publish(twist)
+        sent += 1
+        time.sleep(max(0.0, began + sent / rate_hz - time.monotonic()))
+    print(f'{sent} of each published in {time.monotonic() - began:.1f} s')
+    node.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+
 def churn_child(domain: int, count: int, lifetime_s: float, interval_s: float) -> None:
     """``count`` nodes, one every ``interval_s``, each living ``lifetime_s`` with a
     participant of its own, a publisher, two subscriptions to the arm's topics and a
@@ -326,5 +385,7 @@ if __name__ == '__main__':
         kind, numbers = sys.argv[2], [float(v) for v in sys.argv[3:]]
         if kind == 'flood':
             flood_child(int(numbers[0]), int(numbers[1]))
+        elif kind == 'flood_all':
+            flood_all_child(int(numbers[0]), numbers[1], numbers[2])
         else:
             churn_child(int(numbers[0]), int(numbers[1]), numbers[2], numbers[3])

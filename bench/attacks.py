@@ -1,4 +1,5 @@
-"""The attacks of issue 12 ("never drop the arm"), run on the installed processes.
+"""The attacks of issues 12 and 39 ("never drop the arm"), run on the installed processes
+(the second suite, what reaches the nodes while they run, is in bench/attacks_live.py).
 
 sim, planner and controller run as separate processes on a ROS domain of their own (as the
 process tests run them, through test/arm_rig.py); this process attacks them one attack at
@@ -21,6 +22,7 @@ changed), and listens. One markdown table comes out, a row per attack:
     python bench/attacks.py                  # every attack, a few minutes
     python bench/attacks.py --load           # ... with two busy loops on the machine
     python bench/attacks.py --only flood --seconds 4
+    python bench/attacks.py --write-docs     # ... and keep the table in docs/benchmarks
 
 Needs the package built and sourced (``ros_harness`` finds it on AMENT_PREFIX_PATH). Not a
 test: it asserts nothing and prints a table. Node logs stay in the directory it names.
@@ -43,7 +45,9 @@ from arm_rig import ArmRig, BAD_GOALS, flood_goals, START_Q  # noqa: E402
 from attack_rig import (ANSWERS, ARM, Bench, BIG, Listener, LISTENER_PRIORITY,  # noqa: E402
                         LOAD_BUDGET_S, lowest_points_mm, period_ms, point_of, PRESETS,
                         READY_TIMEOUT_S, short, SIM, y_lowest_m)
+import attacks_live  # noqa: E402
 import busy  # noqa: E402
+import docs_table  # noqa: E402
 import numpy as np  # noqa: E402
 from ros_harness import NodeProcess, Probe, ros_domain  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
@@ -241,6 +245,7 @@ ATTACKS = {
     'flood': flood,
     'set_state_names': set_state_names,
     'controller_restart': controller_restart,
+    **attacks_live.ATTACKS,             # the second suite: what reaches running nodes
 }
 
 
@@ -250,6 +255,7 @@ ATTACKS = {
 def run_attack(b: Bench, name: str) -> dict:
     print(f'== {name}', file=sys.stderr, flush=True)
     try:
+        attacks_live.before(b, name)    # the clock's attacks: in simulated time
         b.prepare()
     except Exception as error:
         return dict(attack=name, done='not run', notes=f'the arm could not be prepared: '
@@ -297,33 +303,36 @@ def incidents(heard: Listener, start_s: float, end_s: float) -> list:
     return out
 
 
-def print_table(rows, heading: str) -> None:
+def table(rows, heading: str) -> str:
     def mm(value):
         return '-' if value is None else f'{value:.0f}'
-    print(f'\n{heading}\n')
-    print('| attack | what was done | lowest point while commanding (mm) | lowest point '
-          'overall (mm) | voltage_command period p50 / p99 / worst (ms) | answers | time to '
-          'ready | notes |')
-    print('|---|---|---|---|---|---|---|---|')
+    lines = [heading, '',
+             '| attack | what was done | lowest point while commanding (mm) | lowest point '
+             'overall (mm) | voltage_command period p50 / p99 / worst (ms) | answers | time to '
+             'ready | notes |', '|---|---|---|---|---|---|---|---|']
     for row in rows:
-        print(f"| {row['attack']} | {row['done']} | {mm(row.get('commanding'))} | "
-              f"{mm(row.get('overall'))} | {row.get('period', '-')} | "
-              f"{row.get('answers') or '-'} | {row.get('ready') or '-'} | "
-              f"{row.get('notes', '').replace('|', '/')} |")
+        lines.append(f"| {row['attack']} | {row['done']} | {mm(row.get('commanding'))} | "
+                     f"{mm(row.get('overall'))} | {row.get('period', '-')} | "
+                     f"{row.get('answers') or '-'} | {row.get('ready') or '-'} | "
+                     f"{row.get('notes', '').replace('|', '/')} |")
+    return '\n'.join(lines)
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--load', action='store_true',
                         help='two busy-loop processes on the machine throughout')
-    parser.add_argument('--only', choices=list(ATTACKS), help='run this attack alone')
+    parser.add_argument('--only', choices=list(ATTACKS), nargs='+',
+                        help='run these attacks alone')
+    parser.add_argument('--write-docs', action='store_true',
+                        help='keep the table in docs/benchmarks/attacks.md')
     parser.add_argument('--seconds', type=float, default=8.0,
                         help='how long an attack watches the arm; other waits scale with it')
     parser.add_argument('--domain', type=int,
                         help='a ROS domain reserved for you (default: a free one, locked as '
                              'the tests lock theirs)')
     args = parser.parse_args()
-    names = [args.only] if args.only else list(ATTACKS)
+    names = args.only or list(ATTACKS)
     # Stopped from outside (timeout, kill): still stop the nodes, or they outlive the
     # domain's lock and disturb whoever takes the domain next.
     signal.signal(signal.SIGTERM, _interrupt)
@@ -354,10 +363,13 @@ def main():
     finally:
         busy.stop(load)
     load_said = 'two busy loops added' if args.load else 'no load added'
-    print_table(rows, f'Attacks ({load_said}; --seconds {args.seconds:g}): bring-up '
-                      f'{bring_up_s:.1f} s, all {took_s:.0f} s; load average '
-                      f'{load_before:.1f} before, {os.getloadavg()[0]:.1f} after; node logs in '
-                      f'{rig.log_dir}')
+    text = table(rows, f'Attacks ({load_said}; --seconds {args.seconds:g}): bring-up '
+                       f'{bring_up_s:.1f} s, all {took_s:.0f} s; load average '
+                       f'{load_before:.1f} before, {os.getloadavg()[0]:.1f} after')
+    print(f'\n{text}\n\nnode logs in {rig.log_dir}')
+    if args.write_docs:
+        command = 'python bench/attacks.py ' + ' '.join(sys.argv[1:])
+        print(docs_table.write('attacks', 'Attacks on the running nodes', command, text))
 
 
 def _interrupt(signum, frame):

@@ -100,3 +100,46 @@ def test_nothing_is_answered_before_the_sims_clock_starts():
         assert ticks == [round(5.0e9)]
     finally:
         loop.stop()
+
+
+@pytest.mark.parametrize('jump_s', [100.0, -10.0])
+def test_a_jump_of_the_clock_does_not_stop_the_ticks(jump_s):
+    """A rogue /clock 100 s ahead, once, then the sim's again (or the sim restarted 10 s
+    back): every later step is answered, and the loop's time never leaps."""
+    clock, answered, times = SimClock(1000.0), threading.Event(), []
+    loop = ControlLoop(clock, PERIOD_S, lambda: (times.append(loop.now_s()), answered.set()))
+    loop.start()
+    try:
+        for step in range(2 * STEPS):
+            assert answered.wait(5.0), f'step {step} not answered'
+            answered.clear()
+            if step == STEPS:
+                clock.nanoseconds += round(jump_s * 1e9)
+                time.sleep(0.005)                   # the loop reads the jumped clock
+                if jump_s > 0:
+                    clock.nanoseconds -= round(jump_s * 1e9)     # the sim's clock again
+            clock.nanoseconds += round(PERIOD_S * 1e9)
+        assert answered.wait(5.0)
+    finally:
+        loop.stop()
+    assert np.all(np.diff(times) >= 0.0) and np.max(np.diff(times)) < 2.5 * PERIOD_S
+    assert loop.guard.jumps >= 1
+
+
+def test_a_clock_that_stops_while_readings_come_does_not_stop_the_ticks():
+    clock, ticks = SimClock(), []
+    reading = {'new': True}
+
+    def tick():
+        ticks.append(time.monotonic())
+        reading['new'] = False
+    loop = ControlLoop(clock, PERIOD_S, tick, has_input=lambda now_s: reading['new'])
+    loop.start()
+    try:
+        began = time.monotonic()
+        while time.monotonic() - began < 2.0:           # the clock stands; readings come
+            reading['new'] = True
+            time.sleep(PERIOD_S)
+    finally:
+        loop.stop()
+    assert len(ticks) >= 3 and loop.clock_stops >= 2

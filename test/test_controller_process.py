@@ -299,6 +299,16 @@ def test_live_tuning_takes_good_values_and_refuses_bad_ones(launch, probe):
     assert get_parameter(probe, 'elbow_pid') == [75.0, 10.0, 3.0]            # kept
     result = set_parameter(probe, 'feedback_voltage_reserve', 13.0)
     assert not result.successful and 'feedback_voltage_reserve' in result.reason
+    # Below the battery's volts, but too much for the current limits: refused whole, as at
+    # start (it once passed, then killed the controller as it was applied).
+    result = set_parameter(probe, 'feedback_voltage_reserve', 8.0)
+    assert not result.successful and 'current_limit_a' in result.reason
+    result = set_parameter(probe, 'shoulder_pid', [1e6, 0.0, 0.0])      # beyond the bound
+    assert not result.successful and "'shoulder_pid'" in result.reason
+    result = set_parameter(probe, 'use_sim_time', True)                  # ROS's own
+    assert not result.successful and 'use_sim_time' in result.reason
+    assert get_parameter(probe, 'use_sim_time') is False
+    assert get_parameter(probe, 'shoulder_pid') == [70.0, 8.0, 3.5]      # alive, unchanged
     assert not set_parameter(probe, 'shoulder.mass_kg', 50.0).successful    # read-only
     # A preset moved at run time is where the next press of its button goes.
     assert set_parameter(probe, 'presets.high_score', [0.6, 1.6]).successful

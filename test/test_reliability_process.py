@@ -113,7 +113,8 @@ def test_malformed_sensor_and_voltage_messages_are_ignored(rig):
     assert rig.spin_until(lambda: any(
         int(d['bad inputs ignored']) >= len(bad_states)
         for d in rig.controller_diagnostics(began)), 3.0), rig.controller_diagnostics(began)
-    assert any(d['level'] == 1 and 'malformed messages ignored' in d['message']
+    # A warning; an error too, as the probe is a second publisher of joint_states.
+    assert any(d['level'] >= 1 and 'malformed messages ignored' in d['message']
                for d in rig.controller_diagnostics(began))
     assert 'rejected a voltage_command' in rig.output('sim')
     assert 'ignored joint_states' in rig.output('controller')

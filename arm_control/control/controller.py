@@ -88,15 +88,18 @@ class ArmController:
         self.tracking_error_rad = np.zeros(2)
         self.estop_error, self.estops = '', 0
 
-    def retune(self, arm: ArmConfig, config: ControllerConfig) -> None:
-        """Settings changed at run time, already validated: gains, reserves, tolerances,
-        dwell, presets. They act from the next period; the arm's physics are unchanged."""
+    def retune(self, arm: ArmConfig, config: ControllerConfig, settings=None) -> None:
+        """Validated settings from the next period (gains, reserves, tolerances, dwell,
+        presets; the physics unchanged); ``settings``: their ``ControllerSettings``, built
+        outside the node's lock."""
+        timer = settings.plan_timer if settings else PlanTimer(arm, config)
+        limits = (settings.max_velocity_rad_s, settings.max_acceleration_rad_s2) if settings \
+            else sure_limits(timer.dynamics, self.forbidden, arm, config)
         self.arm, self.config = arm, config
         self.goals.arm, self.goals.config = arm, config
         self.safety.config = config
         self.pid.retune(config)
-        self.plan_timer = PlanTimer(arm, config)
-        limits = sure_limits(self.plan_timer.dynamics, self.forbidden, arm, config)
+        self.plan_timer = timer
         self.max_velocity[:], self.max_acceleration[:] = limits     # shared with the others
 
     @property
@@ -236,14 +239,18 @@ class ArmController:
 
     # ------------------------------------------------------------------ the control period
 
-    def step(self, now_s: float, reading=None, reading_time_s: Optional[float] = None):
+    def step(self, now_s: float, reading=None, reading_time_s: Optional[float] = None,
+             earlier=()):
         """One control period: returns [Va, Vb] to apply until the next one.
 
         ``reading``: the sensors' latest sample since the last step (a ``SensorReading``, or
-        a plant's Reading), else None; ``reading_time_s``: when it was taken (default now).
+        a plant's Reading), else None; ``reading_time_s``: when it was taken (default now);
+        ``earlier``: (reading, time) of those before it since the last step, folded in first.
         """
         dt_s = self.period_s if self.last_step_s is None else max(now_s - self.last_step_s, 0.0)
         self.last_step_s = now_s
+        for earlier_reading, earlier_s in earlier:
+            self.sensing.update(now_s, earlier_reading, earlier_s, self.voltage)
         self.sensing.update(now_s, reading, reading_time_s, self.voltage)
         self._supervise(now_s)
         pending = self.goals.plans.pending

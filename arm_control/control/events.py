@@ -42,6 +42,10 @@ class EventKind(str, Enum):
     PLANNER_AVAILABLE = 'planner_available'
     PLANNER_GONE = 'planner_gone'
     PARAMETERS = 'parameters'                  # a setting changed at run time
+    CLOCK_JUMPED = 'clock_jumped'              # taken out of control time (ClockGuard)
+    UNTRUSTED = 'untrusted'                    # an input it cannot trust (cause: which)
+    TRUSTED = 'trusted'                        # ... trusted again
+    SENSORS_DISAGREE = 'sensors_disagree'      # a reading refused: the others say otherwise
 
     def __str__(self) -> str:
         return self.value

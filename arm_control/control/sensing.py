@@ -30,6 +30,11 @@ from arm_control.model.electrical import PowerSupply
 # for noise); else the arm is falling or pushed, for the tracking-error rule to judge.
 LEAP_SPEED_FACTOR = 3.0
 LEAP_MARGIN_RAD = 0.05
+# A leap of the potentiometers is refused where the encoders put the arm within this of the
+# estimate (their backlash and noise are a fraction of it), while readings that did not leap
+# came within TRUSTED_SOURCE_S (s); after that the leap is taken: the source it trusted is gone.
+ENCODERS_AGREE_RAD = 0.05
+TRUSTED_SOURCE_S = 0.1
 # The prediction from the last reading is kept as the filter's state once it reaches this far
 # (the sensors silent: no prediction grows without end; a later reading older than that is
 # folded in there).
@@ -78,6 +83,8 @@ class Sensing:
         self.last_potentiometer = None
         self.last_sampled_s = math.nan
         self.jumped = False                # the filter re-initialised: the arm is elsewhere
+        self.refuse_leaps = False          # another node publishes joint_states
+        self.refused, self.refusal = 0, None   # leaps refused, and (cause, why) of the last
 
     @property
     def started(self) -> bool:
@@ -128,6 +135,9 @@ class Sensing:
         sampled_s = float(getattr(reading, 'sampled_s', math.nan))
         bus = float(getattr(reading, 'bus_voltage', math.nan))
         leapt = self._leapt(pot, taken_s, sampled_s)
+        if leapt and self.started and self._refused(pot, encoder, taken_s):
+            self._predict_to(now_s)
+            return
         self.last_reading_s, self.last_sampled_s, self.last_potentiometer = \
             taken_s, sampled_s, pot
         if not self.started:
@@ -148,6 +158,35 @@ class Sensing:
                 if math.isfinite(current) else self.nominal_voltage
         self._predict(self.kept_s, now_s)
         self.time_s = max(now_s, taken_s)
+
+    def _refused(self, pot, encoder, taken_s: float) -> bool:
+        """A leap of the potentiometers refused, and why kept in ``refusal``: the encoders
+        say the arm is where the estimate has it (within ``ENCODERS_AGREE_RAD``; encoders
+        that read about zero may have restarted where the arm was put, and tell nothing), or
+        another node publishes joint_states (``refuse_leaps``) -- while readings that did not
+        leap came within ``TRUSTED_SOURCE_S``. Taken as "the arm moved", each leap of a
+        second publisher had re-held the arm where it said, lower each time, into the floor."""
+        if taken_s - self.last_reading_s > TRUSTED_SOURCE_S:
+            return False                    # the source it trusted went quiet: take this
+        self.estimator.restore(self.kept)
+        self._predict(self.kept_s, max(taken_s, self.kept_s))
+        estimate = self.estimator.state[:2]
+        leap = np.degrees(pot - estimate)
+        if np.all(np.isfinite(encoder)) and np.max(np.abs(encoder)) > ENCODERS_AGREE_RAD:
+            by_encoders = encoder + self.estimator.encoder_zero_rad
+            if np.max(np.abs(by_encoders - estimate)) <= ENCODERS_AGREE_RAD:
+                self.refusal = ('encoders', f'the potentiometers leapt ({leap[0]:+.1f}, '
+                                f'{leap[1]:+.1f}) deg from the estimate where the encoders '
+                                'did not move')
+                self.refused += 1
+                return True
+        if self.refuse_leaps:
+            self.refusal = ('publishers', f'the potentiometers leapt ({leap[0]:+.1f}, '
+                            f'{leap[1]:+.1f}) deg from the estimate while another node '
+                            'publishes joint_states')
+            self.refused += 1
+            return True
+        return False
 
     def _predict_to(self, now_s: float) -> None:
         """Without a reading: the state at ``now_s`` from the last one folded in."""

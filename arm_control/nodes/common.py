@@ -93,12 +93,20 @@ def declare_parameters(node, node_name: str, tunable=(), on_change=None) -> dict
     _refuse_unknown(node, package_parameter_names(path))
 
     def offered(changes) -> SetParametersResult:
-        if on_change is None:
-            return SetParametersResult(
-                successful=False, reason='parameters are read once at start; restart the node')
+        """Refused unless every name is the package's and live, and ``on_change`` takes the
+        whole. ROS's own (``use_sim_time``) are read at start: switched at run time, the
+        controller's loop waited for a /clock that never came and the arm fell."""
+        fixed = [change.name for change in changes if change.name not in declared]
+        if on_change is None or fixed:
+            return SetParametersResult(successful=False, reason=(
+                f"parameter {', '.join(map(repr, fixed))} is " if fixed else 'parameters are ')
+                + 'read once at start; restart the node to change it')
         values = {name: node.get_parameter(name).value for name in declared}
         values.update({change.name: change.value for change in changes})
-        reason = on_change(values)
+        try:
+            reason = on_change(values)
+        except Exception as error:      # a change is refused, never the node's end
+            reason = f'refused: {error!r}'
         return SetParametersResult(successful=reason is None, reason=reason or '')
     node.add_on_set_parameters_callback(offered)
     return {name: node.get_parameter(name).value for name in declared}
@@ -150,6 +158,17 @@ def guarded(callback):
                 response.success, response.message = False, f'failed: {error!r}'
             return response
     return wrapper
+
+
+def log_at(logger, level: str, text: str) -> None:
+    """``text`` at 'info', 'warning' or else error severity (rclpy ties a severity to its
+    call site, so each has its own)."""
+    if level == 'info':
+        logger.info(text)
+    elif level == 'warning':
+        logger.warning(text)
+    else:
+        logger.error(text)
 
 
 def loop_statistics(periods_s, compute_s) -> dict:

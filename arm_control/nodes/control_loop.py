@@ -14,19 +14,27 @@ processes), it answers a step no sooner than a period of wall time after the las
 in step with it, then keeps to real time, and the work costs the arm as much simulated time
 as it would cost real time: planning's wall time had shown up 2-5 times longer on a faster
 clock, and the moves took 1.36-1.41x their minimum there against 1.24x in real time. Budgets
-of wall time (the planner timeout, a plan's lead) hold on the clock as they are."""
+of wall time (the planner timeout, a plan's lead) hold on the clock as they are.
+
+The clock is read through a ``ClockGuard``: its jumps (a rogue /clock, a restarted sim) are
+taken out, so the loop's time never leaps or goes back. A clock that stops while readings
+still come (something else holds /clock) does not stop the loop: after
+``CLOCK_STOPPED_WALL_S`` of wall time it answers the readings on the clock as it stands."""
 
 import threading
 import time
 
 from rclpy.clock import ClockType
 
+from arm_control.control.clock_guard import ClockGuard
 from arm_control.nodes.realtime import raise_this_thread
 
 # With simulated time the clock only moves when /clock does: look this often (wall s).
 SIM_TIME_POLL_S = 0.001
 # With simulated time, a due tick waits at most this long (wall s) for the step's reading.
 SIM_INPUT_WAIT_S = 0.02
+# With simulated time, a reading is answered after this long (wall s) without the clock.
+CLOCK_STOPPED_WALL_S = 0.5
 # A tick is due this close to its time: a clock of ~1e9 s in float seconds is exact to ~1e-7 s,
 # and in simulated time a step's time a hair early would leave the sim waiting on the tick.
 DUE_SLACK_S = 1e-4
@@ -43,12 +51,16 @@ class ControlLoop:
         self.realtime_priority, self.warn = realtime_priority, warn
         self.priority_problem = None
         self.last_tick_s = None             # the clock's time at the last tick
+        # Control time: the clock with its jumps taken out (``ClockGuard``).
+        self.guard = ClockGuard(lambda: (self.clock.now().nanoseconds * 1e-9,
+                                         time.monotonic()))
+        self.clock_stops = 0                # ticks on a reading, the clock stopped
         self._wake = threading.Event()
         self._stopping = False
         self._thread = threading.Thread(target=self._run, daemon=True, name='control loop')
 
     def now_s(self) -> float:
-        return self.clock.now().nanoseconds * 1e-9
+        return self.guard.now_s()
 
     def started(self) -> bool:
         """The clock runs. With simulated time it reads 0 until the first /clock: a reading
@@ -89,12 +101,16 @@ class ControlLoop:
         due_s = self.now_s()
         waiting_since = None                # wall s a due simulated tick began to wait
         last_tick_wall = -float('inf')
+        jumps_seen = self.guard.jumps
         while not self._stopping:
             now, wall = self.now_s(), time.monotonic()
             if now <= 0.0:                  # simulated time before the first /clock
                 self._wake.wait(SIM_TIME_POLL_S)
                 continue
             poked = self._wake.is_set()
+            if self.guard.jumps != jumps_seen:
+                # Across a jump of the clock control time stood still: its step is due now.
+                jumps_seen, due_s = self.guard.jumps, now
             due = now >= due_s - DUE_SLACK_S
             if not poked and due and self.simulated():
                 waiting_since = wall if waiting_since is None else waiting_since
@@ -104,7 +120,16 @@ class ControlLoop:
                     self._wake.wait(SIM_TIME_POLL_S)
                     continue
             waiting_since = None
-            if poked or due:
+            # The clock stopped while readings come: answer them on the clock as it is (a
+            # paused sim stops both, and nothing is sent).
+            stopped = self.simulated() and not due and self.has_input(now) \
+                and wall - last_tick_wall > CLOCK_STOPPED_WALL_S
+            if stopped:
+                self.clock_stops += 1
+                if self.clock_stops % 20 == 1:
+                    self.warn(f'the clock stopped while joint states come: answering them '
+                              f'({self.clock_stops} times so far)')
+            if poked or due or stopped:
                 self._wake.clear()
                 if self._stopping:
                     return

@@ -36,24 +36,27 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
-from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
-from arm_control.control.health import diagnostics, health
+from arm_control.control.health import diagnostics, health, loop_values, trust_values
+from arm_control.control.input_gate import InputGate
 from arm_control.control.latency import CommandDelay
+from arm_control.control.live_settings import changed_names, controller_settings, TUNABLE
 from arm_control.control.robot_command import Commander
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
+from arm_control.control.trust import GraphCounts, TrustWatch
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
-                                      LATCHED, loop_statistics, PLANNER_AVAILABLE, run,
-                                      STATE_STREAM, status)
+                                      LATCHED, log_at, loop_statistics, PLANNER_AVAILABLE,
+                                      run, STATE_STREAM, status)
 from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.plan_link import PlanLink
 from arm_control.nodes.trajectory_server import TrajectoryServer
 from arm_control.parameters import ParameterError
 
 PLANNER_POLL_S = 0.05             # how often to look whether the planner is there
+GRAPH_WATCH_S = 0.5               # how often to count who else publishes its topics
 # The executor's thread (messages, services) at SCHED_FIFO this low when the loop is at real
 # time: above every normal process, below the loop. At normal priority a busy machine can
 # preempt it while it holds Python's lock, and the loop would then wait for the lock.
@@ -62,10 +65,8 @@ SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V comman
 # A reading is timed at its stamp when that is at most this long before its arrival, and
 # not after it (the stamp on this host's clock); else at its arrival.
 STAMP_TRUSTED_S = 0.05
-TUNABLE = ('shoulder_pid', 'elbow_pid', 'integrator_limit_v', 'feedback_voltage_reserve',
-           'driving_voltage_reserve', 'goal_tolerance_rad', 'settled_velocity_rad_s',
-           'dwell_s', 'presets.')
-# Goals are kept until taken: a burst (a script, a flood) is answered, not dropped.
+READINGS_KEPT = 4                 # joint_states kept for the next tick, the latest last
+# Goals, presets, driver commands kept until taken: answered or counted (``InputGate``).
 GOALS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 EVENTS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 MAX_ANGLE_RAD = 4.0 * math.pi     # no sensor of this arm reads beyond two turns
@@ -79,15 +80,15 @@ class ControllerNode(Node):
         super().__init__('controller')
         self.core = None
         params = declare_parameters(self, 'controller', TUNABLE, self.on_parameters)
-        self.arm = ArmConfig.from_parameters(params)
-        self.config = ControllerConfig.from_parameters(params)
-        self.config.check_against(self.arm)
+        self.settings = controller_settings(params)         # as every change is checked
+        self.arm, self.config = self.settings.arm, self.settings.config
         self.lock = threading.Lock()                # the core, between the threads
         self.plans = PlanLink(self, self.arm, self.config, self.on_timed_plan)
         self.core = ArmController(self.arm, self.config)
         self.trajectories = TrajectoryServer(self, params)     # FollowJointTrajectory, topic
+        self.trust, self.gate = TrustWatch(self.core), InputGate()
         # The latest reading for the loop, and the encoders and bus: (value, received at).
-        self.reading = self.encoders = self.bus = None
+        self.readings, self.encoders, self.bus = [], None, None
         self.bad_inputs = self.bad_inputs_said = 0
         self.last_state = self.last_queue_version = None
         self.loop_periods_s, self.loop_compute_s, self.last_tick_s = [], [], None
@@ -108,8 +109,8 @@ class ControllerNode(Node):
                 ('motor_encoders', JointState, self.on_encoders, STATE_STREAM),
                 ('battery_state', BatteryState, self.on_battery, STATE_STREAM),
                 ('goal_point', PointStamped, self.on_goal_point, GOALS),
-                ('goal_preset', String, self.on_goal_preset, COMMANDS),
-                ('driver_velocity', TwistStamped, self.on_driver, COMMANDS)):
+                ('goal_preset', String, self.on_goal_preset, GOALS),
+                ('driver_velocity', TwistStamped, self.on_driver, GOALS)):
             self.create_subscription(kind, topic, handler, qos)
         for name, call in (('~/estop', self.core.estop), ('~/reset', self.core.reset),
                            ('~/cancel', self.core.cancel)):
@@ -121,6 +122,7 @@ class ControllerNode(Node):
         self.planner_ready = None
         self.create_timer(PLANNER_POLL_S, self.watch_planner)
         self.create_timer(1.0, self.publish_diagnostics)
+        self.create_timer(GRAPH_WATCH_S, self.watch_graph)
         priority = self.config.realtime_priority
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
                                 self.get_logger().warning, self.has_reading, self.plans.busy,
@@ -168,17 +170,12 @@ class ControllerNode(Node):
     def on_joint_states(self, msg: JointState) -> None:
         if not self.loop.started():
             return                                  # the sim's clock is not there yet
-        position = messages.joint_pair(msg, 'position')
-        velocity = messages.joint_pair(msg, 'velocity') or [math.nan, math.nan]
-        top_speed = self.core.sensing.max_leap_speed_rad_s       # beyond what motors give
-        if position is None or not messages.within(position, MAX_ANGLE_RAD) or \
-                not messages.within([v for v in velocity if not math.isnan(v)], top_speed):
-            return self.warn_bad(f'ignored joint_states: expected finite positions of '
-                                 f'[shoulder, elbow] within two turns and velocities, if any, '
-                                 f'within {top_speed:.0f} rad/s; got {len(msg.name)} names, '
-                                 f'{len(msg.position)} positions, {len(msg.velocity)} '
-                                 'velocities')
-        now, stamp = self.now_s(), messages.stamp_s(msg.header)
+        self.core.sensing.refuse_leaps |= self.count_publishers('joint_states') > 1
+        pair = messages.joint_readings(msg, MAX_ANGLE_RAD, self.core.sensing.max_leap_speed_rad_s)
+        if isinstance(pair, str):
+            return self.warn_bad(f'ignored joint_states: {pair}')
+        position, velocity = pair
+        now, stamp = self.now_s(), self.loop.guard.to_control_s(messages.stamp_s(msg.header))
         age_s = now - stamp
         if math.isfinite(age_s):
             self.reading_ages_s.append(age_s)
@@ -192,11 +189,13 @@ class ControllerNode(Node):
         # the median) the estimate lagged the arm by that much motion, and the feedback drove
         # the elbow up to 1.5 deg ahead on a 0.2 s hop (past its goal in 5 of 24 runs, 40-60 ms
         # more to settle; 0 of 24 at the stamps). In simulated time the stamp is the clock's,
-        # which may not have reached it yet.
-        trusted = 0.0 <= age_s <= STAMP_TRUSTED_S or self.loop.simulated()
+        # which may not have reached it yet, or have jumped since.
+        trusted = 0.0 <= age_s <= STAMP_TRUSTED_S or (
+            self.loop.simulated() and abs(age_s) <= self.config.joint_state_timeout_s)
         taken = stamp if trusted else now
-        self.reading = (SensorReading(tuple(position), tuple(velocity), tuple(encoder),
-                                      stamp, bus, supply_current), taken)
+        # All since the last tick: beside a second publisher the latest was often its.
+        self.readings = self.readings[-(READINGS_KEPT - 1):] + [(SensorReading(
+            tuple(position), tuple(velocity), tuple(encoder), stamp, bus, supply_current), taken)]
 
     @guarded
     def on_encoders(self, msg: JointState) -> None:
@@ -215,23 +214,27 @@ class ControllerNode(Node):
 
     @guarded
     def on_goal_point(self, msg: PointStamped) -> None:
-        if not self.refused(msg.header.frame_id, 'frame_id', 'goal'):
+        if not self.refused('goal_point', msg.header.frame_id, 'frame_id', 'goal'):
             p = msg.point
             self.command(self.core.submit_goal, p.x, p.y, p.z, msg.header.frame_id)
 
     @guarded
     def on_goal_preset(self, msg: String) -> None:
-        if not self.refused(msg.data, 'preset name', 'preset'):
+        if not self.refused('goal_preset', msg.data, 'preset name', 'preset'):
             self.command(self.core.submit_preset, msg.data.strip())
 
     @guarded
     def on_driver(self, msg: TwistStamped) -> None:
-        if not self.refused(msg.header.frame_id, 'frame_id', 'driver command'):
+        if not self.refused('driver_velocity', msg.header.frame_id, 'frame_id',
+                            'driver command'):
             linear = msg.twist.linear
             self.command(self.core.driver_command, linear.x, linear.y, msg.header.frame_id)
 
-    def refused(self, text: str, what: str, whose: str) -> bool:
-        """Text too long to be a name is refused before anything formats it."""
+    def refused(self, topic: str, text: str, what: str, whose: str) -> bool:
+        """An input beyond its topic's rate is dropped and counted (``InputGate``); text too
+        long to be a name is refused before anything formats it."""
+        if not self.gate.admit(topic, time.monotonic()):
+            return True
         problem = messages.name_problem(text, what)
         if problem:
             self.command(self.core.goals.reject, f'{whose} rejected: {problem}', 'oversized')
@@ -243,32 +246,27 @@ class ControllerNode(Node):
         return response
 
     def on_parameters(self, params):
-        """A run-time change: validated whole, taken from the next period, or refused with
-        the reason (the old values kept)."""
+        """A run-time change: checked whole as at start (``controller_settings``), taken
+        from the next period, or refused with the reason (the old values kept)."""
         if self.core is None:
             return None                             # the overrides at start: read below
         try:
-            arm, config = ArmConfig.from_parameters(params), \
-                ControllerConfig.from_parameters(params)
-            config.check_against(arm)
+            settings = controller_settings(params, self.settings)
         except ParameterError as error:
             return str(error)
-        changed = [name for name in TUNABLE if getattr(config, name, None) !=
-                   getattr(self.config, name, None)] + (
-            ['presets'] if arm.presets != self.arm.presets else [])
-        self.plans.retune(arm, config)
+        changed = changed_names(self.settings, settings)
+        self.plans.retune(settings.arm, settings.config)
         with self.lock:
-            self.core.retune(arm, config)
+            self.core.retune(settings.arm, settings.config, settings)
             self.core.events.say(self.core_now_s(), Kind.PARAMETERS, 'info',
                                  f'changed at run time: {", ".join(changed) or "nothing"}')
-        self.arm, self.config = arm, config
+        self.settings, self.arm, self.config = settings, settings.arm, settings.config
         self.outputs.trigger()
         return None
 
     def has_reading(self, now_s: float) -> bool:
         """The joint states of ``now_s`` (simulated time: the sim's step) are in."""
-        reading = self.reading
-        return reading is not None and reading[0].sampled_s >= now_s - 1e-6
+        return any(taken >= now_s - 1e-6 for _, taken in self.readings)
 
     def watch_planner(self) -> None:
         """Tell the core when the planner (and the timing worker) comes or goes; with no
@@ -284,6 +282,17 @@ class ControllerNode(Node):
         self.plans.let_keeper_work(idle and not moving)
         self.plans.keep_presets(idle)
 
+    @guarded
+    def watch_graph(self) -> None:
+        """Who else publishes what it reads or writes, or takes its name (``TrustWatch``)."""
+        me = (self.get_name(), self.get_namespace())
+        counts = GraphCounts(*(self.count_publishers(topic) if topic else 0 for topic in (
+            'joint_states', '/clock' if self.loop.simulated() else '', 'voltage_command')),
+            self.get_node_names_and_namespaces().count(me))
+        with self.lock:
+            self.trust.graph(self.core_now_s(), counts)
+        self.outputs.trigger()
+
     def warn_bad(self, message: str) -> None:
         self.bad_inputs += 1
         self.get_logger().warning(message, throttle_duration_sec=1.0)
@@ -292,17 +301,19 @@ class ControllerNode(Node):
 
     def tick(self) -> None:
         began, now = time.perf_counter(), self.now_s()
-        reading, self.reading = self.reading, None
-        if reading is not None:
-            self.commander.clock.observe(reading[0].sampled_s)
+        readings, self.readings = self.readings, []
+        for reading, _ in readings:
+            self.commander.clock.observe(reading.sampled_s)
         acts_s = self.acts_s(now)
         with self.lock:
             try:
-                voltage = self.core.step(acts_s, *(reading or (None, None)))
+                voltage = self.core.step(acts_s, *(readings[-1] if readings else (None, None)),
+                                         earlier=readings[:-1])
             except Exception as error:              # a bug must stop the arm, not the node
                 self.core.estop(acts_s, f'internal error in the control step: {error!r}',
                                 cut_power=True)
                 voltage = np.zeros(2)
+            self.trust.step(acts_s, self.loop.guard.take())
             estimate, setpoint = self.core.estimate, self.core.setpoint
             said = (self.core.events.waiting or self.core.goals.plans.waiting
                     or self.core.state != self.last_state
@@ -338,15 +349,9 @@ class ControllerNode(Node):
             state, pending = self.core.state, self.core.pending_goals()
             version = self.core.goals.queue.version
             requests = self.core.take_plan_requests()
-        log = self.get_logger()
         for event in events:
             self.events_pub.publish(String(data=str(event)))
-            if event.level == 'info':           # rclpy ties a severity to its call site
-                log.info(str(event))
-            elif event.level == 'warning':
-                log.warning(str(event))
-            else:
-                log.error(str(event))
+            log_at(self.get_logger(), event.level, str(event))
         if state != self.last_state:
             self.last_state = state
             self.state_pub.publish(String(data=str(state)))
@@ -371,20 +376,15 @@ class ControllerNode(Node):
             (not self.plans.worker.alive, 'the plan worker process is gone: goals will fail'),
             (malformed, f'{malformed} malformed messages ignored (the log says which)')) if bad]
         with self.lock:
+            self.gate.flush(self.core, self.core_now_s(), time.monotonic())
             values, planner = diagnostics(self.core, self.now_s()), self.core.planner_available
-            level, message = health(self.core, stats['worst'], problems)
-        values.update({
-            'loop period mean (s)': f'{stats["mean"]:.4f}',
-            'loop period worst (s)': f'{stats["worst"]:.4f}',
-            'compute per cycle median (ms)': f'{1000 * stats["compute median"]:.3f}',
-            'compute per cycle worst (ms)': f'{1000 * stats["compute worst"]:.3f}',
-            # On one clock (one host, or sim time): how late the readings come to the loop.
-            'joint_states age worst (ms)': f'{1000 * max(ages, default=math.nan):.1f}',
-            'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner),
-            'trajectories kept': self.plans.worker.kept,
-            'loop scheduling': self.loop.priority_problem or (
-                f'SCHED_FIFO {self.loop.realtime_priority}' if self.loop.realtime_priority
-                else 'normal')})
+            level, message = health(self.core, stats['worst'], problems,
+                                    self.trust.problems.values())
+            values.update(trust_values(self.trust))
+        values.update(loop_values(stats, ages, self.loop))
+        values.update({'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner),
+                       'trajectories kept': self.plans.worker.kept,
+                       **{f'{kind} dropped': n for kind, n in self.gate.dropped.items()}})
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()
         diagnostic.status = [status(self, LEVELS[level], message, values)]

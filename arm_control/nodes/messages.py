@@ -31,6 +31,21 @@ def joint_pair(msg: JointState, field: str = 'position') -> Optional[list[float]
     return [float(v) for v in values] if len(values) == 2 else None
 
 
+def joint_readings(msg: JointState, max_angle_rad: float, top_speed_rad_s: float):
+    """(positions, velocities) of [shoulder, elbow] (NaN velocities when none are given), or
+    a str saying why the message cannot be a reading: positions not finite or beyond
+    ``max_angle_rad``, velocities beyond ``top_speed_rad_s``."""
+    position = joint_pair(msg, 'position')
+    velocity = joint_pair(msg, 'velocity') or [math.nan, math.nan]
+    if position is None or not within(position, max_angle_rad) or \
+            not within([v for v in velocity if not math.isnan(v)], top_speed_rad_s):
+        return (f'expected finite positions of [shoulder, elbow] within '
+                f'{max_angle_rad:.1f} rad and velocities, if any, within '
+                f'{top_speed_rad_s:.0f} rad/s; got {len(msg.name)} names, '
+                f'{len(msg.position)} positions, {len(msg.velocity)} velocities')
+    return position, velocity
+
+
 def within(values, bound: float) -> bool:
     """Every value finite and within ±bound."""
     return all(math.isfinite(v) and abs(v) <= bound for v in values)
