@@ -17,7 +17,7 @@ from arm_control.sysid.quality import assess
 from arm_control.sysid.regressor import base_parameters
 from arm_control.sysid.settings import SysIdConfig
 from arm_control.sysid.simulated import identification_run
-from arm_control.sysid.wpilog import read_recording, read_wpilog
+from arm_control.sysid.wpilog import ENTRIES, read_recording, read_wpilog
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 PERIOD_S = 0.02
@@ -42,20 +42,37 @@ def us(time_s):
     return int(round(1e6 * (1.0 + time_s)))
 
 
+def held_at(log, times_s):
+    """The command in force at each of ``times_s`` (the latest at or before it; 0 V before
+    the first), as a robot's reading reports what its loop applies from then on."""
+    index = np.searchsorted(log.command_time_s, times_s, side='right') - 1
+    return np.where(index[:, None] >= 0, log.voltage_v[np.maximum(index, 0)], 0.0)
+
+
+def test_the_default_entries_are_the_reading_fields():
+    field = contract.READING_FIELD
+    names = ('position_rad', 'velocity_rad_s', 'applied_voltage_v', 'bus_voltage_v')
+    assert ENTRIES == tuple(f'{contract.READING.name}[{field[name].start}:'
+                            f'{field[name].start + field[name].size}]' for name in names)
+
+
 def test_a_robot_wpilog_reads_back_and_identifies_the_arm(tmp_path, demo_run, arm, settings):
     demo, run = demo_run
     log = run.log
     robot = RunLog(tmp_path / 'robot.wpilog')
-    for t, q, qd in zip(log.joint_time_s, log.position_rad, log.velocity_rad_s):
-        robot.append(contract.POSITION.name, q, us(t))
-        robot.append(contract.VELOCITY.name, qd, us(t))
-    for t, v in zip(log.command_time_s, log.voltage_v):    # applied over the loop ending then
-        robot.append(contract.APPLIED_VOLTAGE.name, v, us(t + PERIOD_S))
+    field = contract.READING_FIELD
+    for t, q, qd, v in zip(log.joint_time_s, log.position_rad, log.velocity_rad_s,
+                           held_at(log, log.joint_time_s)):
+        reading = np.full(contract.READING_SIZE, np.nan)
+        for name, value in (('time_us', us(t)), ('enabled', 1.0), ('position_rad', q),
+                            ('velocity_rad_s', qd), ('applied_voltage_v', v)):
+            reading[field[name].indices] = value
+        robot.append(contract.READING.name, reading, us(t))
     robot.close()
     back = read_recording(robot.path)
     assert np.allclose(back.position_rad, log.position_rad)
-    assert np.allclose(back.voltage_v, log.voltage_v)
-    assert np.allclose(back.command_time_s - 1.0, log.command_time_s, atol=2e-6)
+    assert np.allclose(back.voltage_v, held_at(log, log.joint_time_s))
+    assert np.allclose(back.command_time_s - 1.0, log.joint_time_s, atol=2e-6)
     assert not back.has_reference()
     # No plan in a robot's log: least squares, whose inertias the closed loop pulls down a
     # little; the moments and friction are found, and the quality check passes them.
