@@ -89,6 +89,21 @@ def test_the_clock_learns_the_robot_loop_from_the_stamps():
         pytest.approx(last + 2 * 0.0201)                    # too close: the one after
 
 
+def test_another_publishers_readings_off_the_grid_do_not_move_it_a_moved_loop_does():
+    clock = RobotClock(0.02)
+    grid = 50.004 + 0.02 * np.arange(40)
+    for k, stamp in enumerate(grid):
+        clock.observe(stamp)
+        clock.observe(stamp + 0.0093 + 0.0001 * k)          # a second publisher, its own phase
+    assert clock.last_s == pytest.approx(grid[-1])
+    assert clock.period_s == pytest.approx(0.02, abs=1e-9)
+    moved = grid[-1] + 0.011 + 0.02 * np.arange(1, 8)       # the robot's loop jumped 11 ms
+    for stamp in moved:
+        clock.observe(stamp)
+    assert clock.last_s == pytest.approx(moved[-1])
+    assert clock.next_instant(moved[-1] + 0.001) == pytest.approx(moved[-1] + 0.02)
+
+
 def _held_core(arm, controller_config, q=(0.3, 1.2)):
     loop = RobotLoop(arm, controller_config, start=q, mode='profile', seed=2)
     loop.run(1.0)

@@ -40,6 +40,7 @@ ARRIVAL_MARGIN_S = 0.003
 # so every command acts one period after the reading it answers, whatever the phase.
 TICK_AFTER_INSTANT_S = 0.003
 CLOCK_WINDOW = 25             # readings' gaps the robot's period is the median of
+OFF_GRID_TO_FOLLOW = 5        # readings in a row off the grid before it follows (a moved loop)
 
 
 class RobotClock:
@@ -50,6 +51,7 @@ class RobotClock:
         self.period_s = self.nominal_period_s
         self.last_s = None                     # the latest reading's stamp
         self.gaps_s = deque(maxlen=CLOCK_WINDOW)
+        self.off_grid = 0                      # readings in a row off the loop's grid
 
     def observe(self, stamp_s: float) -> None:
         """A reading stamped ``stamp_s`` (s); a missed reading leaves a gap of whole periods."""
@@ -58,11 +60,19 @@ class RobotClock:
         if self.last_s is not None:
             gap = stamp_s - self.last_s
             periods = round(gap / self.period_s)
-            if periods >= 1 and abs(gap - periods * self.period_s) < 0.25 * self.period_s:
+            if periods < 1 or abs(gap - periods * self.period_s) >= 0.25 * self.period_s:
+                self.off_grid += 1
+                # Off the loop's grid: another publisher's, or the robot's loop moved. The
+                # grid follows only when the readings stay off it.
+                if self.off_grid < OFF_GRID_TO_FOLLOW:
+                    return
+                self.gaps_s.clear()
+            else:
                 self.gaps_s.append(gap / periods)
                 median = statistics.median(self.gaps_s)
                 self.period_s = min(max(median, 0.5 * self.nominal_period_s),
                                     2.0 * self.nominal_period_s)
+        self.off_grid = 0
         self.last_s = float(stamp_s)
 
     def acting_at(self, arrives_s: float) -> float:
