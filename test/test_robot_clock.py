@@ -63,6 +63,7 @@ def test_a_plain_command_times_out_to_zero_volts_and_a_profile_holds():
     commands.take(0.14)
     assert commands.volts(60.0, (1.0, -1.0), (0.0, 0.0)) == (3.0, 2.0)   # held at its end
     assert not commands.timed_out(60.0)
+    assert commands.late == 1                       # taken after its first setpoint's instant
 
 
 def test_a_profile_not_yet_begun_leaves_the_command_before_it():
