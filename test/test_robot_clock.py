@@ -124,7 +124,7 @@ def test_a_profile_mid_move_stops_along_the_path_and_holds(arm, controller_confi
     and stays, above the floor."""
     loop = RobotLoop(arm, controller_config, planner, start=(1.5708, -1.5708), seed=3)
     loop.run(0.3)
-    loop.core.submit_goal(loop.now_s, -1.0, 1.0)
+    loop.submit_goal(-1.0, 1.0)
     assert loop.run(2.0, lambda: np.max(np.abs(loop.plant.state[2:])) > 2.0)
     loop._tick = lambda now_ms: None                        # the controller is gone
     loop.run(3.0)
@@ -149,7 +149,7 @@ def _move_s(arm, controller_config, planner, mode, phase_ms, robot_loop=True):
                      phase_s=phase_ms / 1000.0, robot_loop=robot_loop)
     loop.run(0.5)
     goal_s = loop.now_s
-    loop.core.submit_goal(goal_s, -1.2, 0.3)
+    loop.submit_goal(-1.2, 0.3)
     loop.run(4.0)
     times = np.array([t for t, _ in loop.history])
     q = np.array([s[:2] for _, s in loop.history])
