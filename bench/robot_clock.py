@@ -65,6 +65,7 @@ class Row:
     hold_speed: float = math.nan
     hold_swing_deg: float = math.nan
     ratios: list = dataclasses.field(default_factory=list)
+    names: list = dataclasses.field(default_factory=list)      # the move of each ratio
     lowest_mm: float = math.inf
     failed: list = dataclasses.field(default_factory=list)
 
@@ -110,7 +111,7 @@ def move_in_process(arm, controller_config, planner, row, start_q, goal_xy, seed
                      phase_s=phase_s(row), robot_loop=row.timing == 'robot_loop')
     loop.run(0.5)
     goal_s = loop.now_s
-    loop.core.submit_goal(goal_s, *goal_xy)
+    loop.submit_goal(*goal_xy)
     loop.run(MOVE_TIMEOUT_S)
     times = np.array([t for t, _ in loop.history])
     q = np.array([s[:2] for _, s in loop.history])
@@ -136,6 +137,7 @@ def run_in_process(args, rows, moves):
             move_s, lowest = move_in_process(arm, controller_config, planner, row, start_q,
                                              goal_xy, k)
             row.ratios.append(move_s / minimums[name]['min_s'])
+            row.names.append(name)
             row.lowest_mm = min(row.lowest_mm, lowest)
             if not math.isfinite(move_s):
                 row.failed.append(name)
@@ -167,6 +169,11 @@ def table(rows, bar: float) -> str:
             f'{fmt(max(finite, default=math.nan))} | '
             f'{fmt(statistics.median(finite) if finite else math.nan)} | '
             f'{within} of {len(row.ratios)} | {row.lowest_mm:.0f} |')
+    beyond = [f'{row.timing} {fmt(row.phase_ms, ".0f")} ms {row.mode}: {name} ({ratio:.2f})'
+              for row in rows for name, ratio in zip(row.names, row.ratios)
+              if not ratio <= bar]
+    if beyond:
+        lines.append(f'\nBeyond {bar:.2f}x: {"; ".join(beyond)}.')
     return '\n'.join(lines)
 
 

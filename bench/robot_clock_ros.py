@@ -58,6 +58,7 @@ def run(args, rows, suite) -> str:
             for name, start_xy, goal_xy in suite:
                 for _ in range(args.repeats):
                     result = ros.move(goal_xy) if ros.go_to(start_xy) is not None else None
+                    row.names.append(name)
                     if result is None or not math.isfinite(result['ros_s']):
                         row.failed.append(name)
                         row.ratios.append(math.nan)

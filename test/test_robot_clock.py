@@ -63,6 +63,7 @@ def test_a_plain_command_times_out_to_zero_volts_and_a_profile_holds():
     commands.take(0.14)
     assert commands.volts(60.0, (1.0, -1.0), (0.0, 0.0)) == (3.0, 2.0)   # held at its end
     assert not commands.timed_out(60.0)
+    assert commands.late == 1                       # taken after its first setpoint's instant
 
 
 def test_a_profile_not_yet_begun_leaves_the_command_before_it():
@@ -138,7 +139,7 @@ def test_a_profile_mid_move_stops_along_the_path_and_holds(arm, controller_confi
     and stays, above the floor."""
     loop = RobotLoop(arm, controller_config, planner, start=(1.5708, -1.5708), seed=3)
     loop.run(0.3)
-    loop.core.submit_goal(loop.now_s, -1.0, 1.0)
+    loop.submit_goal(-1.0, 1.0)
     assert loop.run(2.0, lambda: np.max(np.abs(loop.plant.state[2:])) > 2.0)
     loop._tick = lambda now_ms: None                        # the controller is gone
     loop.run(3.0)
@@ -163,7 +164,7 @@ def _move_s(arm, controller_config, planner, mode, phase_ms, robot_loop=True):
                      phase_s=phase_ms / 1000.0, robot_loop=robot_loop)
     loop.run(0.5)
     goal_s = loop.now_s
-    loop.core.submit_goal(goal_s, -1.2, 0.3)
+    loop.submit_goal(-1.2, 0.3)
     loop.run(4.0)
     times = np.array([t for t, _ in loop.history])
     q = np.array([s[:2] for _, s in loop.history])

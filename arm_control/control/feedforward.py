@@ -41,7 +41,7 @@ class PeriodFeedforward:
         self.restart_rad = float(restart_rad)
         self.state = None               # the reference [θa, θb, ωa, ωb] at time_s
         self.time_s = -math.inf
-        self.voltage = np.zeros(2)
+        self.voltage = self.next_voltage = np.zeros(2)
 
     def reset(self) -> None:
         self.state = None
@@ -102,4 +102,5 @@ class PeriodFeedforward:
         except np.linalg.LinAlgError:
             pass
         self.voltage = np.clip(guess[:2], -limit, limit)
+        self.next_voltage = np.clip(guess[2:], -limit, limit)     # the period after
         return self.voltage.copy()

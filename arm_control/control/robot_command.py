@@ -15,9 +15,11 @@ robot's instants (``TICK_AFTER_INSTANT_S``), and sends a profile
   has the arm, the robot applies the controller's volts exactly; what it reads differently
   it corrects at once. The robot's raw potentiometers are noisier than the filtered
   estimate, hence a share: the integral stays in the volts (it is slow);
-- setpoints 1 to ``AHEAD - 1``: the motion's own setpoints, one robot period apart, with
-  the inverse dynamics' volts at each period's middle -- a command that comes a period late,
-  or is lost, leaves the robot on the motion, not on a stale voltage;
+- setpoints 1 to ``AHEAD - 1``: the motion's own setpoints, one robot period apart -- a
+  command that comes a period late, or is lost, leaves the robot on the motion, not on a
+  stale voltage. Setpoint 1's volts are the feedforward's for the period after the step's
+  (its deadbeat pair) with the step's share of P and D and its integral, the error taken as
+  it is; the later ones', the inverse dynamics' at each period's middle;
 - then a stop to rest along the path the arm is on (``Setpoints.stopping``), ending at rest
   with its holding volts: played to its end with nothing newer, a profile leaves the arm held.
 """
@@ -146,6 +148,8 @@ def profile_ahead(core, start_s: float, step_s: float) -> Profile:
     middles = [sample(t + 0.5 * step_s) for t in times]
     middles[-1] = samples[-1] = (stop.final_q, np.zeros(2), np.zeros(2))   # held, at rest
     volts = core.feedforward.dynamics.voltages(*(np.array(v) for v in zip(*middles)))
+    if AHEAD > 1:                            # setpoint 1: the step's next period
+        volts[0] = core.feedforward.next_voltage + (1.0 - share) * proportional_derivative
     rest = [Setpoint(tuple(map(float, q)), tuple(map(float, qd)), tuple(map(float, v + integral)))
             for (q, qd, _), v in zip(samples, volts)]
     return Profile(float(start_s), float(step_s), gains, (first, *rest))

@@ -65,6 +65,16 @@ class RobotLoop:
     def now_s(self) -> float:
         return self.now_ms / 1000.0
 
+    def poke(self) -> None:
+        """Tick at the next millisecond, as the node's loop does when a plan is ready
+        (``ControlLoop.poke``); the ticks then keep to their schedule from there."""
+        self.next_tick_ms = self.now_ms
+
+    def submit_goal(self, x: float, y: float) -> None:
+        """A goal now, taken at once: the core plans it in that tick."""
+        self.core.submit_goal(self.now_s, x, y)
+        self.poke()
+
     def run(self, seconds: float, until=None) -> bool:
         for _ in range(round(seconds * 1000.0 / STEP_MS)):
             self._step()

@@ -25,6 +25,7 @@ class RobotCommands:
         self.pair, self.pair_s = ZERO_V, -math.inf     # the last plain command, its arrival
         self.playing = False                # a profile is in charge
         self.taken = 0                      # commands taken so far
+        self.late = 0                       # profiles taken after their first setpoint's instant
 
     def arrive(self, arrived_s: float, command) -> None:
         """A decoded command (``profile.decode_command``) arrived at ``arrived_s``."""
@@ -36,6 +37,7 @@ class RobotCommands:
         self.waiting = [c for c in self.waiting if c[0] > t_s]
         for arrived_s, command in taken:
             if isinstance(command, Profile):
+                self.late += t_s > command.start_s + 0.5 * command.step_s
                 self.player.offer(command)
                 self.playing = True
             else:

@@ -365,6 +365,7 @@ class SimNode(Node):
             'mean period (s)': f'{stats["mean"]:.4f}', 'worst period (s)': f'{stats["worst"]:.4f}',
             'commands rejected': self.commands_rejected,
             'commands late for their period': self.late_commands,
+            'profiles late for their first instant': self.commands.late,
             'command transit median (ms)': f'{1e3 * statistics.median(transits):.2f}'
                                            if transits else 'n/a',
             'command transit worst (ms)': f'{1e3 * max(transits):.2f}' if transits else 'n/a',
