@@ -22,7 +22,9 @@ from arm_control.control.events import parse_event
 from arm_control.control.goals import GoalValidator
 from arm_control.control.plans import preset_pairs
 from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.model.profile import Profile
 from arm_control.model.world import ForbiddenSpace
+from arm_control.nodes import messages
 from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED
 
 SETTLE_TIMEOUT_S = 40.0
@@ -227,10 +229,17 @@ def test_services_estop_reset_cancel_enable(launch, probe, arm):
 
     voltages = probe.collect(Float64MultiArray, '/voltage_command', COMMANDS)
     assert probe.spin_until(lambda: len(voltages) > 10, 5.0)
-    assert any(abs(v) > 0.5 for v in voltages[-1].data)     # holding against gravity
+    holding = messages.command_of(voltages[-1])
+    assert isinstance(holding, Profile)                     # command_mode: profile
+    assert any(abs(v) > 0.5 for v in holding.setpoints[-1].feedforward_v)   # against gravity
     assert probe.processes['controller'].stop() == 0
     probe.spin_for(0.3)
-    assert list(voltages[-1].data) == [0.0, 0.0]            # its last word: 0 V
+    # Its last word: a profile ending at rest with its holding volts (the robot holds the
+    # arm), the last it computed, not 0 V (issue 39: a hand-over never drops the arm).
+    last = messages.command_of(voltages[-1])
+    assert isinstance(last, Profile) and last.setpoints[-1].velocity_rad_s == (0.0, 0.0)
+    assert any(abs(v) > 0.5 for v in last.setpoints[-1].feedforward_v)
+    assert last.start_s >= holding.start_s
 
 
 @pytest.fixture

@@ -13,8 +13,8 @@ Three threads of work: the control loop (``ControlLoop``) steps the core and com
 motors; the executor takes messages and services (at ``EXECUTOR_PRIORITY``, below the loop);
 a worker process times plans, and its keeper keeps fine trajectories (``PlanLink``). The
 core is shared under a lock held only for quick calls and the publishing of a command
-(a write that DDS blocks holds Python's own lock too: the process waits either way). 0 V on
-exit.
+(a write that DDS blocks holds Python's own lock too: the process waits either way). On
+exit: its last profile again (a stop to rest, held), or 0 V sending volts or unpowered.
 """
 
 import math
@@ -95,6 +95,7 @@ class ControllerNode(Node):
         self.reading_ages_s = []            # arrival minus stamp of each joint_states
         self.command_delay = CommandDelay(self.config.period_s)
         self.commander = Commander(self.config)     # what to send, for the robot's instants
+        self.last_command = None                    # the last sent: a pair or a Profile
         sys.setswitchinterval(0.001)   # another thread waits 1 ms for Python, not 5
 
         self.voltage_pub = self.create_publisher(Float64MultiArray, 'voltage_command', COMMANDS)
@@ -160,6 +161,7 @@ class ControllerNode(Node):
             powered = not self.core.unpowered
             result = call(self.core_now_s(), *args)
             if powered and self.core.unpowered and not self.loop.simulated():
+                self.last_command = (0.0, 0.0)
                 self.voltage_pub.publish(Float64MultiArray(data=[0.0, 0.0]))
         self.publish_outputs()
         return result
@@ -319,8 +321,8 @@ class ControllerNode(Node):
                     or self.core.state != self.last_state
                     or self.core.goals.queue.version != self.last_queue_version)
             if estimate is not None:     # before the first reading there is nothing to command
-                self.voltage_pub.publish(messages.voltage_command(
-                    self.commander.command(self.core, voltage, acts_s)))
+                self.last_command = self.commander.command(self.core, voltage, acts_s)
+                self.voltage_pub.publish(messages.voltage_command(self.last_command))
         if estimate is not None:
             self.command_delay.sent(time.perf_counter() - began)
             stamp = Time(nanoseconds=round(acts_s * 1e9)).to_msg()     # what they are for
@@ -391,21 +393,32 @@ class ControllerNode(Node):
         self.diagnostics_pub.publish(diagnostic)
 
     def on_shutdown(self) -> None:
-        """0 V on the way out: the arm must not keep the last command."""
+        """The last word: sending profiles and powered, the last profile again (it ends at
+        rest with its holding volts, so the robot holds the arm until a newer command);
+        else 0 V. Not STYLE's 0 V on exit: issue 39, a hand-over never drops the arm."""
         self.loop.stop()
+        with self.lock:
+            last = self.last_command
+            if not self.commander.profiles:
+                last = (0.0, 0.0)
+            elif last is not None and self.core.unpowered:
+                last = (0.0, 0.0)
+        if last is None:           # a profile controller that never commanded: leave the arm
+            self.plans.close()
+            return
         try:
             for _ in range(3):
-                self.voltage_pub.publish(Float64MultiArray(data=[0.0, 0.0]))
+                self.voltage_pub.publish(messages.voltage_command(last))
             # Reliable: make sure the sim has it before the process goes away.
             self.voltage_pub.wait_for_all_acked(Duration(seconds=SHUTDOWN_ACK_S))
         except Exception as error:              # the context may already be gone
-            self.get_logger().warning(f'could not send 0 V on shutdown: {error}')
+            self.get_logger().warning(f'could not send the last command on shutdown: {error}')
         self.plans.close()
 
 
 def controller_node() -> ControllerNode:
     """The node, with SIGINT and SIGTERM handed back to Python: rclpy's own handlers shut
-    the context down before ``on_shutdown`` runs, so the last 0 V could not go out."""
+    the context down before ``on_shutdown`` runs, so the last command could not go out."""
     uninstall_signal_handlers()
     signal.signal(signal.SIGINT, interrupt)
     signal.signal(signal.SIGTERM, interrupt)
