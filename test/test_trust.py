@@ -11,6 +11,7 @@ import pytest
 
 from arm_control.control.clock_guard import ClockGuard
 from arm_control.control.events import EventKind as Kind
+from arm_control.control.sensing import Sensing, SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.control.trust import GraphCounts, TrustWatch
 
@@ -165,3 +166,28 @@ def test_each_jump_of_the_clock_is_said(arm, controller_config):
     said = [e for e in rig.core.events.history if e.kind == Kind.CLOCK_JUMPED]
     assert len(said) == 2 and watch.clock_jumps == 2
     assert rig.core.state == ArmState.WAITING                  # nothing else changes
+
+
+@pytest.mark.parametrize('gap_periods', [1, 2, 4])
+def test_beside_a_second_publisher_a_reading_away_from_the_prediction_is_refused(
+        arm, controller_config, gap_periods):
+    """The robot's readings 20 ms apart, some missed (lost, or more than the loop keeps on a
+    slow tick); the second publisher's 20 deg off in between, up to 75 ms after the last
+    reading taken. In that time the arm could move 20 deg at three times its free speed, so
+    the leap from the last reading tells nothing: the filter's prediction does. Upright at
+    0 V (no gravity torque), the arm stays where it is."""
+    sensing = Sensing(arm, controller_config.process_noise_rad_s2)
+    sensing.refuse_leaps = True
+    upright = (math.pi / 2, 0.0)
+    true = SensorReading(upright, (0.0, 0.0))
+    stray = SensorReading((upright[0] + ROGUE_OFFSET_RAD, upright[1]), (0.0, 0.0))
+    for block in range(5):
+        for j in range(10):
+            t = 0.2 * block + 0.02 * j
+            if not 0 < j < gap_periods:                 # those missed
+                sensing.update(t, true, t, (0.0, 0.0))
+            if j == 0:                                  # the stray, 5 ms before a reading
+                t_stray = t + 0.02 * gap_periods - 0.005
+                sensing.update(t_stray, stray, t_stray, (0.0, 0.0))
+    assert sensing.refused == 5
+    assert np.max(np.abs(sensing.state[:2] - upright)) < 0.1 * DEG

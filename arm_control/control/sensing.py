@@ -135,7 +135,8 @@ class Sensing:
         sampled_s = float(getattr(reading, 'sampled_s', math.nan))
         bus = float(getattr(reading, 'bus_voltage', math.nan))
         leapt = self._leapt(pot, taken_s, sampled_s)
-        if leapt and self.started and self._refused(pot, encoder, taken_s):
+        if (leapt or self.refuse_leaps) and self.started and \
+                self._refused(pot, encoder, taken_s, leapt):
             self._predict_to(now_s)
             return
         self.last_reading_s, self.last_sampled_s, self.last_potentiometer = \
@@ -159,18 +160,25 @@ class Sensing:
         self._predict(self.kept_s, now_s)
         self.time_s = max(now_s, taken_s)
 
-    def _refused(self, pot, encoder, taken_s: float) -> bool:
+    def _refused(self, pot, encoder, taken_s: float, leapt: bool = True) -> bool:
         """A leap of the potentiometers refused, and why kept in ``refusal``: the encoders
         say the arm is where the estimate has it (within ``ENCODERS_AGREE_RAD``; encoders
         that read about zero may have restarted where the arm was put, and tell nothing), or
         another node publishes joint_states (``refuse_leaps``) -- while readings that did not
         leap came within ``TRUSTED_SOURCE_S``. Taken as "the arm moved", each leap of a
-        second publisher had re-held the arm where it said, lower each time, into the floor."""
+        second publisher had re-held the arm where it said, lower each time, into the floor.
+
+        While another node publishes, a reading is a leap when it lies farther than
+        ``LEAP_MARGIN_RAD`` from the filter's prediction at its instant, however long since
+        the last reading: the free-speed bound of ``_leapt`` grows with the interval (20 deg
+        in under 30 ms), so a second publisher's reading after a missed one passed it."""
         if taken_s - self.last_reading_s > TRUSTED_SOURCE_S:
             return False                    # the source it trusted went quiet: take this
         self.estimator.restore(self.kept)
         self._predict(self.kept_s, max(taken_s, self.kept_s))
         estimate = self.estimator.state[:2]
+        if not leapt and np.max(np.abs(pot - estimate)) <= LEAP_MARGIN_RAD:
+            return False
         leap = np.degrees(pot - estimate)
         if np.all(np.isfinite(encoder)) and np.max(np.abs(encoder)) > ENCODERS_AGREE_RAD:
             by_encoders = encoder + self.estimator.encoder_zero_rad
