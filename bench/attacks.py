@@ -224,9 +224,10 @@ def controller_restart(b: Bench) -> dict:
     if after:
         truth = b.heard.truth_between(after[0], math.inf)
         found = f'{1000 * y_lowest_m(*truth[0, 1:]):.0f} mm' if len(truth) else 'not heard'
-        commands = (f'voltage_command silent {after[0] - silent_from_s:.2f} s (0 V after '
-                    f'{SIM.command_timeout_s:g} s of it), resumed {after[0] - started_s:.1f} '
-                    f's after the start; lowest point {found} then')
+        commands = (f'voltage_command silent {after[0] - silent_from_s:.2f} s (a profile '
+                    f'ends held; a plain pair: 0 V after {SIM.command_timeout_s:g} s), '
+                    f'resumed {after[0] - started_s:.1f} s after the start; lowest point '
+                    f'{found} then')
     else:
         commands = f'voltage_command still silent {time.time() - silent_from_s:.1f} s on'
     return dict(done=f'controller SIGKILLed while holding, started again at once; a goal at '
