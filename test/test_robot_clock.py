@@ -105,6 +105,22 @@ def test_another_publishers_readings_off_the_grid_do_not_move_it_a_moved_loop_do
     assert clock.next_instant(moved[-1] + 0.001) == pytest.approx(moved[-1] + 0.02)
 
 
+def test_a_stamp_across_a_jump_of_the_clock_does_not_move_it_for_good():
+    clock = RobotClock(0.02)
+    grid = 20.004 + 0.02 * np.arange(30)
+    for stamp in grid[:20]:
+        clock.observe(stamp)
+    clock.observe(grid[20] + 10.0)                          # converted across a clock jump
+    for stamp in grid[21:]:
+        clock.observe(stamp)
+    assert clock.last_s == pytest.approx(grid[-1])
+    assert clock.next_instant(grid[-1] + 0.001) == pytest.approx(grid[-1] + 0.02)
+    back = grid[-1] - 10.0 + 0.02 * np.arange(1, 8)         # the clock itself went back
+    for stamp in back:
+        clock.observe(stamp)
+    assert clock.last_s == pytest.approx(back[-1])
+
+
 def _held_core(arm, controller_config, q=(0.3, 1.2)):
     loop = RobotLoop(arm, controller_config, start=q, mode='profile', seed=2)
     loop.run(1.0)

@@ -42,6 +42,7 @@ ARRIVAL_MARGIN_S = 0.003
 # so every command acts one period after the reading it answers, whatever the phase.
 TICK_AFTER_INSTANT_S = 0.003
 CLOCK_WINDOW = 25             # readings' gaps the robot's period is the median of
+MAX_GAP_PERIODS = 10          # a stamp further ahead than this many periods is off the grid
 OFF_GRID_TO_FOLLOW = 5        # readings in a row off the grid before it follows (a moved loop)
 
 
@@ -57,15 +58,18 @@ class RobotClock:
 
     def observe(self, stamp_s: float) -> None:
         """A reading stamped ``stamp_s`` (s); a missed reading leaves a gap of whole periods."""
-        if not math.isfinite(stamp_s) or (self.last_s is not None and stamp_s <= self.last_s):
+        if not math.isfinite(stamp_s):
             return
         if self.last_s is not None:
             gap = stamp_s - self.last_s
+            if -0.5 * self.period_s < gap <= 0.0:
+                return                         # the same reading again, or one reordered
             periods = round(gap / self.period_s)
-            if periods < 1 or abs(gap - periods * self.period_s) >= 0.25 * self.period_s:
+            if not 1 <= periods <= MAX_GAP_PERIODS or \
+                    abs(gap - periods * self.period_s) >= 0.25 * self.period_s:
                 self.off_grid += 1
-                # Off the loop's grid: another publisher's, or the robot's loop moved. The
-                # grid follows only when the readings stay off it.
+                # Off the loop's grid: another publisher's, a stamp across a jump of the
+                # clock, or the robot's loop moved. It follows only readings that stay off.
                 if self.off_grid < OFF_GRID_TO_FOLLOW:
                     return
                 self.gaps_s.clear()
