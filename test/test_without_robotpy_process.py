@@ -12,6 +12,8 @@ from nav_msgs.srv import GetPlan
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from arm_control.nodes.common import LATCHED
+
 ROBOTPY = ('wpimath', 'wpiutil', 'ntcore', 'wpilib', 'hal')
 # Imported by Python at start (from PYTHONPATH): every robotpy module then fails to import,
 # as on a machine where it was never installed.
@@ -48,7 +50,7 @@ def test_sim_planner_and_controller_run_on_arm_yaml_without_robotpy(launch, prob
     environment = without_robotpy(tmp_path)
     nodes = [launch(name, environment=environment) for name in ('sim', 'planner', 'controller')]
     states = probe.collect(JointState, 'joint_states')
-    arm_states = probe.collect(String, 'arm_state', 10)
+    arm_states = probe.collect(String, 'arm_state', LATCHED)     # said once, at its change
     assert probe.spin_until(lambda: states and arm_states, 60.0), [n.output() for n in nodes]
     request = GetPlan.Request(start=PoseStamped(), goal=PoseStamped())
     request.start.pose.position.x, request.start.pose.position.y = 0.8, 1.0
