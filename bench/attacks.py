@@ -53,8 +53,8 @@ from ros_harness import NodeProcess, Probe, ros_domain  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
+from arm_control import realtime  # noqa: E402
 from arm_control.control.events import parse_event  # noqa: E402
-from arm_control.nodes import realtime  # noqa: E402
 
 
 def idle(b: Bench) -> dict:

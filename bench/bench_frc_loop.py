@@ -52,7 +52,7 @@ from arm_control.frc.settings import load_robot_sim  # noqa: E402
 from arm_control.frc.tables import free_port, now_us  # noqa: E402
 from arm_control.model.dynamics import ArmDynamics  # noqa: E402
 from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED  # noqa: E402
-from arm_control.nodes.realtime import raise_process  # noqa: E402
+from arm_control.realtime import raise_process  # noqa: E402
 
 GOALS = ('mid_score', 'high_score', 'back_score')
 HOLD_S, HOLD_SPEED_RAD_S, HOLD_SWING_RAD = 2.0, 0.1, np.radians(0.5)

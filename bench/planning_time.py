@@ -47,8 +47,8 @@ from arm_control.control.plans import PlanRequest, PlanTimer, PresetAnswers  # n
 from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
 from arm_control.nodes.plan_worker import HandoverClock  # noqa: E402
-from arm_control.nodes.realtime import raised  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
+from arm_control.realtime import raised  # noqa: E402
 
 PLANNING_REPEATS = 10
 FRC_ROBOT = BENCH.parent / 'config' / 'frc_robot.yaml'

@@ -10,6 +10,7 @@ import time
 import ntcore
 import numpy as np
 import pytest
+from wpilog_reader import read_wpilog
 
 from arm_control.frc import contract, conversions, mechanism, rules, settings as frc_settings
 from arm_control.frc.tables import free_port, LOOPBACK
@@ -310,26 +311,6 @@ def test_the_mechanism_draws_the_arm_where_it_is(arm, nt_pair):
 
 
 # ---------------------------------------------------------------------- .wpilog
-
-
-def read_wpilog(path) -> dict:
-    """{entry name: (type, metadata, [(timestamp µs, value), ...])} from a .wpilog."""
-    from wpiutil.log import DataLogReader
-    reader = DataLogReader(str(path))
-    assert reader.isValid()
-    starts, entries = {}, {}
-    for record in reader:
-        if record.isStart():
-            start = record.getStartData()
-            starts[start.entry] = start.name
-            entries[start.name] = (start.type, start.metadata, [])
-        elif not record.isControl():
-            name = starts[record.getEntry()]
-            kind = entries[name][0]
-            value = {'double[]': record.getDoubleArray, 'double': record.getDouble,
-                     'boolean': record.getBoolean, 'string': record.getString}[kind]()
-            entries[name][2].append((record.getTimestamp(), value))
-    return entries
 
 
 def test_the_wpilog_reads_back_with_names_units_times_and_values(tmp_path):

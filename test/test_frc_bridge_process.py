@@ -371,7 +371,7 @@ def test_a_bad_parameter_stops_the_bridge_naming_it(launch):
 
 def test_the_run_is_a_wpilog_that_advantagescope_opens(rig):
     """Stopped, the bridge sends 0 V on its way out and closes the log."""
-    from test_frc import read_wpilog
+    from wpilog_reader import read_wpilog
     rig.watch.poll()
     assert rig.nodes['frc_bridge'].stop() == 0
     rig.probe.spin_for(0.3)

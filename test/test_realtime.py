@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from arm_control.nodes.realtime import raised
+from arm_control.realtime import raised
 
 
 def in_a_thread(work):

@@ -29,7 +29,7 @@ import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.driver import DriverMode
-from arm_control.control.events import EventKind as Kind, EventLog, quote
+from arm_control.control.events import EventKind as Kind, EventLog
 from arm_control.control.feedforward import PeriodFeedforward
 from arm_control.control.goal_runner import GoalRunner
 from arm_control.control.motions import Motion, Setpoints
@@ -40,6 +40,7 @@ from arm_control.control.sensing import Sensing
 from arm_control.control.state_machine import (ArmState as S, COMMANDING, StateMachine,
                                                STOPPED, Trigger as T)
 from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.text import quote
 
 # A planned motion waits for an arm late on it by more than a period (behind along its path:
 # its first commands held up, a weak start), by that lag less a period, at most WAIT_LIMIT_S

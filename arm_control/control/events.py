@@ -4,7 +4,7 @@ Every goal gets an answer: queued, accepted, rejected, failed or reached. In a f
 rejections beyond ``REJECTIONS_PER_WINDOW`` in a window are not said one by one: they are
 counted by reason and said in one ``goals_rejected`` event per window, so none is lost
 silently and a listener is not drowned. Text that came from outside (a preset's name, a
-frame) is quoted by ``quote``: at most a short prefix, with the length.
+frame) is quoted by ``arm_control.text.quote``: at most a short prefix, with the length.
 """
 
 from collections import deque
@@ -14,7 +14,6 @@ from enum import Enum
 REJECTIONS_PER_WINDOW = 20
 WINDOW_S = 1.0
 HISTORY = 200
-QUOTE_CHARS = 40
 
 
 class EventKind(str, Enum):
@@ -72,13 +71,6 @@ def parse_event(text: str) -> tuple[str, str, str]:
     head, _, message = text.partition(': ')
     kind, _, cause = head.partition(' (')
     return kind, cause.rstrip(')'), message
-
-
-def quote(text: str, limit: int = QUOTE_CHARS) -> str:
-    """``text`` in quotes, or its first ``limit`` characters and its length when longer."""
-    if len(text) <= limit:
-        return repr(text)
-    return f'{text[:limit]!r}... ({len(text)} characters)'
 
 
 class EventLog:

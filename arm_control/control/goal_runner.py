@@ -15,11 +15,12 @@ from typing import Optional
 import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
-from arm_control.control.events import EventKind as Kind, EventLog, quote
+from arm_control.control.events import EventKind as Kind, EventLog
 from arm_control.control.goals import Goal, GoalQueue, GoalValidator
 from arm_control.control.motions import Motion, Setpoints, StoppingMotion, StraightStop
 from arm_control.control.plans import PlanHandoff, PlanRequest, TimedPlan
 from arm_control.control.state_machine import ArmState as S, StateMachine, Trigger as T
+from arm_control.text import quote
 
 # A preempting goal's new trajectory starts this far ahead on the current one: the time
 # the planner and the timing need, so the switch happens on time. Doubled on each retry.

@@ -20,9 +20,9 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from arm_control.config import ArmConfig, FRAME_ID
-from arm_control.control.events import quote
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
+from arm_control.text import quote
 
 PLANE_TOLERANCE_M = 0.001        # |z| allowed off the arm's plane
 # Clamped points land this far inside the annulus, so rounding cannot push them out again.

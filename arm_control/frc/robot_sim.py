@@ -29,8 +29,8 @@ from arm_control.frc.robot_loop import loop_instants, RobotLoop
 from arm_control.frc.settings import FrcRobotSimConfig, load_robot_sim
 from arm_control.frc.tables import LOOPBACK, now_us, RobotTables
 from arm_control.model.plant import ArmPlant
-from arm_control.nodes.realtime import raise_process
 from arm_control.parameters import ParameterError
+from arm_control.realtime import raise_process
 
 LOG_EVERY_S = 1.0           # the same complaint at most this often
 

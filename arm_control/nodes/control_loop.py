@@ -27,7 +27,7 @@ import time
 from rclpy.clock import ClockType
 
 from arm_control.control.clock_guard import ClockGuard
-from arm_control.nodes.realtime import raise_this_thread
+from arm_control.realtime import raise_this_thread
 
 # With simulated time the clock only moves when /clock does: look this often (wall s).
 SIM_TIME_POLL_S = 0.001

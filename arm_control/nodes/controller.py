@@ -36,6 +36,7 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
+from arm_control import realtime
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health, loop_values, trust_values
@@ -46,7 +47,7 @@ from arm_control.control.robot_command import Commander
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.control.trust import GraphCounts, TrustWatch
-from arm_control.nodes import messages, realtime
+from arm_control.nodes import messages
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
                                       LATCHED, log_at, loop_statistics, PLANNER_AVAILABLE,
                                       run, STATE_STREAM, status)

@@ -29,6 +29,7 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, Header, String
 from std_srvs.srv import SetBool
 
+from arm_control import realtime
 from arm_control.config import ArmConfig
 from arm_control.frc import contract as nt
 from arm_control.frc.codec import decode_reading, encode_profile, encode_voltage, profile_command
@@ -42,7 +43,6 @@ from arm_control.frc.wpilog import (BRIDGE_EVENTS, CONTROLLER_SETPOINT,
                                     CONTROLLER_SETPOINT_VELOCITY, CONTROLLER_VOLTAGE, RunLog)
 from arm_control.model import profile as profiles
 from arm_control.model.dynamics import ArmDynamics
-from arm_control.nodes import realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, LATCHED, run,
                                       STATE_STREAM, status)
 from arm_control.nodes.frc_messages import age_summary, reading_messages

@@ -12,8 +12,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension
 
 from arm_control.config import FRAME_ID, JOINT_NAMES
-from arm_control.control.events import quote
 from arm_control.model.profile import decode_command, encode, Profile
+from arm_control.text import quote
 
 # Names (a preset, a frame) longer than this are refused before they are logged or echoed.
 MAX_NAME_CHARS = 64

@@ -53,11 +53,12 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
+from arm_control import realtime
 from arm_control.config import ArmConfig, JOINT_NAMES, SimConfig
 from arm_control.model.plant import ArmPlant
 from arm_control.model.profile import ProfileError
 from arm_control.model.robot_commands import RobotCommands
-from arm_control.nodes import messages, realtime
+from arm_control.nodes import messages
 from arm_control.nodes.common import (COMMANDS, declare_parameters, loop_statistics, run,
                                       STATE_STREAM, status)
 

@@ -31,8 +31,8 @@ from rclpy.signals import uninstall_signal_handlers
 from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, Header
 
+from arm_control import realtime
 from arm_control.config import ArmConfig, JOINT_NAMES
-from arm_control.nodes import realtime
 from arm_control.nodes.common import COMMANDS, declare_parameters, interrupt, run, STATE_STREAM
 from arm_control.nodes.messages import finite, joint_pair
 from arm_control.sysid.handover import degrees, HandOver, holding_said

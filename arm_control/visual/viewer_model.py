@@ -13,10 +13,10 @@ import re
 from typing import Any, Mapping
 
 from arm_control.config import ArmConfig, FRAME_ID
-from arm_control.control.events import quote
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.parameters import ParameterError
+from arm_control.text import quote
 from arm_control.visual.scene import path_configurations, reachable_free, Scene
 
 MAX_GOALS = 256                 # goals shown at most; a flood beyond this is not drawn
