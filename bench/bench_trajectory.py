@@ -60,12 +60,12 @@ import minimum_time as ocp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from arm_control import config  # noqa: E402
-from arm_control.control.trajectory import (time_optimal_trajectory,  # noqa: E402
-                                            TrajectoryError, TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics  # noqa: E402
 from arm_control.model.electrical import PowerSupply  # noqa: E402
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
+from arm_control.timing import (time_optimal_trajectory,  # noqa: E402
+                                TrajectoryError, TrajectoryLimits)
 
 TIMING_REPEATS = 5
 WHAT_IF_LIMITS_A = (40.0, 60.0, 80.0, 120.0, math.inf)

@@ -27,11 +27,11 @@ import numpy as np
 
 from arm_control import config
 from arm_control.control.goals import GoalValidator
-from arm_control.control.trajectory import time_optimal_trajectory, TrajectoryLimits
 from arm_control.model.dynamics import ArmDynamics, COULOMB_SMOOTHING_RAD_S
 from arm_control.model.electrical import PowerSupply
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.planner import Planner
+from arm_control.timing import time_optimal_trajectory, TrajectoryLimits
 
 KNOTS = (25, 50, 100)
 CACHE = Path(__file__).resolve().parent / '.minimum_cache.json'   # suite_minimums' answers

@@ -2,8 +2,8 @@
 
 Each room is a folder of ``arm_control/`` (or a module at its top), on the floor its layer
 gives it: the parameter files, the arm description and the logs at the bottom, the model
-with the world, control, planning, identification and the FRC side on it, then what people
-see and the node shells on top. An
+with the world, timing, planning, identification and the FRC side on it, control (which
+follows timed motions) and what people see above them, and the node shells on top. An
 arrow is the imports from one room to another (their count); one that runs up a floor, or
 sideways between two node shells, is drawn red and listed under the picture.
 
@@ -22,8 +22,9 @@ matplotlib.use('Agg')
 from matplotlib import patches, pyplot  # noqa: E402
 
 # Floor of each room (higher imports lower), and what it holds, for the picture.
-LAYERS = {'parameters': 0, 'config': 1, 'logs': 1, 'model': 2, 'control': 3, 'planning': 3,
-          'sysid': 3, 'frc': 3, 'visual': 4, 'bringup': 5, 'nodes': 5}
+LAYERS = {'parameters': 0, 'text': 0, 'realtime': 0, 'config': 1, 'logs': 1, 'model': 2,
+          'timing': 3, 'planning': 3, 'sysid': 3, 'frc': 3, 'control': 4, 'visual': 4,
+          'bringup': 5, 'nodes': 5}
 # Modules of nodes/ that are executables: a shell importing another shell is sideways.
 SHELLS = {'sim', 'controller', 'planner', 'tour', 'viewer', 'markers', 'recorder',
           'frc_bridge', 'sysid'}
@@ -106,7 +107,7 @@ def draw(package: Path, output: Path, title: str) -> list[str]:
             (x - width / 2, y - 0.045), width, 0.09, boxstyle='round,pad=0.005',
             facecolor='#dfe8f1', edgecolor='#c0392b' if sideways else '#34495e'))
         name = f'{room}/' if len(files[room]) > 1 or room in ('model', 'control', 'planning',
-                                                              'visual', 'nodes') else \
+                                                              'timing', 'visual', 'nodes') else \
             f'{room}.py'
         ax.text(x, y + 0.018, f'{name}  {lines[room]} lines', ha='center', fontsize=10,
                 weight='bold')

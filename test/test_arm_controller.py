@@ -19,12 +19,12 @@ from arm_control.control.events import EventKind as Kind
 from arm_control.control.goals import StraightLinePlanner
 from arm_control.control.plans import PlanRequest
 from arm_control.control.state_machine import ArmState
-from arm_control.control.trajectory import time_optimal_trajectory, TrajectoryLimits
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.plant import ArmPlant
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.planner import Planner
+from arm_control.timing import time_optimal_trajectory, TrajectoryLimits
 
 
 # --- reaching goals, with the estimator in the loop -----------------------------------------

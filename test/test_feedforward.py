@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from arm_control import config
-from arm_control.control.feedforward import PeriodFeedforward
-from arm_control.control.trajectory import time_optimal_trajectory, TrajectoryLimits
 from arm_control.model.dynamics import ArmDynamics
+from arm_control.model.feedforward import PeriodFeedforward
 from arm_control.model.plant import ArmPlant
 from arm_control.model.world import ForbiddenSpace
+from arm_control.timing import time_optimal_trajectory, TrajectoryLimits
 
 UP_TO_THE_FRONT = [(1.5708, -1.5708), (0.3, 0.5)]
 

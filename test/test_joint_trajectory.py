@@ -9,17 +9,16 @@ import numpy as np
 import pytest
 
 from arm_control.control.joint_trajectory import (ErrorCode, in_arm_order, JointTolerance,
-                                                  SplineTrajectory, start_delay_s,
-                                                  TrajectoryPoint, TrajectoryRefused,
-                                                  TrajectoryRequest)
+                                                  SplineTrajectory, start_delay_s, TrajectoryPoint,
+                                                  TrajectoryRefused, TrajectoryRequest)
 from arm_control.control.motions import Motion
-from arm_control.control.trajectory import TrajectoryLimits
-from arm_control.control.trajectory.timing import check
-from arm_control.control.trajectory_goals import (FollowSettings, Tolerances,
-                                                  TrajectoryGoals, TrajectoryWatch)
+from arm_control.control.trajectory_goals import (FollowSettings, Tolerances, TrajectoryGoals,
+                                                  TrajectoryWatch)
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.parameters import ParameterError, read_parameter_files
+from arm_control.timing import TrajectoryLimits
+from arm_control.timing.timing import check
 
 START = np.array([1.5708, -1.5708])
 

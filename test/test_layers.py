@@ -1,41 +1,21 @@
-"""The house keeps its layers: each package imports only those beneath it, rclpy stays in the
-node shells, no module reaches back to one that imports it, and no test imports another.
+"""The house keeps its layers: imports point down the floors ``scripts/draw_layers.py`` draws
+(the picture and this test read one rule), rclpy stays in the node shells, no module reaches
+back to one that imports it, and no test module imports another.
 
 Read from the source (ast), so a new import is checked the moment it is written."""
 
 import ast
 from pathlib import Path
+import sys
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / 'arm_control'
+sys.path.insert(0, str(ROOT / 'scripts'))
+import draw_layers  # noqa: E402, I100
 
-# What each part may import, beside the standard library and third-party libraries. The
-# physics (model) and the parameters are the floor; the node shells and the launch helpers
-# are the roof; nothing below the roof imports rclpy.
-MAY_IMPORT = {
-    'parameters': set(),
-    'config': {'parameters'},
-    'model': {'config', 'parameters'},
-    'planning': {'config', 'parameters', 'model'},
-    'control': {'config', 'parameters', 'model', 'text'},
-    'sysid': {'config', 'parameters', 'model', 'logs'},
-    'logs': {'config', 'parameters', 'model'},
-    'visual': {'config', 'parameters', 'model', 'logs', 'text'},
-    'realtime': set(),
-    'text': set(),
-    'frc': {'config', 'parameters', 'model', 'realtime'},
-    'nodes': {'config', 'parameters', 'model', 'planning', 'control', 'sysid', 'logs',
-              'visual', 'realtime', 'text', 'frc'},
-    'bringup': {'config', 'parameters'},
-}
 ROS_CLIENT = 'rclpy'
-
-
-def module_name(path: Path) -> str:
-    parts = path.relative_to(ROOT).with_suffix('').parts
-    return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
 
 
 def imports(path: Path) -> set[str]:
@@ -50,54 +30,45 @@ def imports(path: Path) -> set[str]:
     return found
 
 
+def module_name(path: Path) -> str:
+    return '.'.join(path.relative_to(ROOT).with_suffix('').parts).removesuffix('.__init__')
+
+
 SOURCES = {module_name(path): path for path in sorted(PACKAGE.rglob('*.py'))}
 
 
-def part(module: str) -> str:
-    """'arm_control.control.plans' -> 'control'; 'arm_control.config' -> 'config'."""
-    return module.split('.')[1]
+def test_every_room_has_a_floor():
+    rooms = {draw_layers.room_of(module) for module in SOURCES if module != PACKAGE.name}
+    assert rooms <= set(draw_layers.LAYERS), sorted(rooms - set(draw_layers.LAYERS))
 
 
-def own_imports(module: str) -> set[str]:
-    """The package's modules that ``module`` imports (a name imported from a package that is
-    a module of its own counts as that module)."""
-    return {name for name in imports(SOURCES[module]) if name in SOURCES} - {module}
-
-
-def test_every_part_is_placed_in_the_layers():
-    parts = {part(module) for module in SOURCES if module != 'arm_control'}
-    assert parts <= set(MAY_IMPORT), sorted(parts - set(MAY_IMPORT))
-
-
-@pytest.mark.parametrize('module', [m for m in SOURCES if m != 'arm_control'])
-def test_a_module_imports_only_the_layers_beneath_it(module):
-    allowed = MAY_IMPORT[part(module)] | {part(module)}
-    reaching_up = sorted(name for name in own_imports(module)
-                         if name != 'arm_control' and part(name) not in allowed)
-    assert not reaching_up, f'{module} imports {reaching_up}'
+def test_imports_point_down_the_floors():
+    _, _, edges = draw_layers.read_imports(PACKAGE)
+    wrong = sorted(f'{a} -> {b}' for a, b in edges if draw_layers.wrong_way(a, b))
+    assert edges and not wrong, wrong
 
 
 def test_rclpy_stays_in_the_node_shells():
     users = sorted(module for module, path in SOURCES.items()
                    if any(name.split('.')[0] == ROS_CLIENT for name in imports(path)))
-    assert users and all(part(module) == 'nodes' for module in users), users
+    assert users and all(draw_layers.room_of(module) == 'nodes' for module in users), users
 
 
 def test_no_module_reaches_back_to_one_that_imports_it():
-    graph = {module: own_imports(module) for module in SOURCES}
+    graph = {module: {name for name in imports(path) if name in SOURCES} - {module}
+             for module, path in SOURCES.items()}
     visiting, done = [], set()
 
     def visit(module):
         if module in visiting:
             pytest.fail('import circle: ' + ' -> '.join(
                 visiting[visiting.index(module):] + [module]))
-        if module in done:
-            return
-        visiting.append(module)
-        for name in sorted(graph[module]):
-            visit(name)
-        visiting.pop()
-        done.add(module)
+        if module not in done:
+            visiting.append(module)
+            for name in sorted(graph[module]):
+                visit(name)
+            visiting.pop()
+            done.add(module)
 
     for module in sorted(graph):
         visit(module)
@@ -106,6 +77,5 @@ def test_no_module_reaches_back_to_one_that_imports_it():
 def test_no_test_module_imports_another():
     tests = {path.stem for path in (ROOT / 'test').rglob('test_*.py')}
     for path in sorted((ROOT / 'test').rglob('*.py')):
-        borrowed = sorted(name.split('.')[0] for name in imports(path)
-                          if name.split('.')[0] in tests - {path.stem})
+        borrowed = sorted({name.split('.')[0] for name in imports(path)} & tests - {path.stem})
         assert not borrowed, f'{path.name} imports {borrowed}'

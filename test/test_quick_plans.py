@@ -21,18 +21,18 @@ from arm_control.control.closed_loop import ClosedLoop
 from arm_control.control.goals import Goal
 from arm_control.control.plans import (BranchRanking, KeptTrajectories, PathPlan, PlanRequest,
                                        PlanTimer, preset_pairs)
-from arm_control.control.trajectory import (bus, exact, refined_trajectory,
-                                            time_optimal_trajectory, TrajectoryLimits)
-from arm_control.control.trajectory.bus import compile_kernels, exact_timing
-from arm_control.control.trajectory.exact import fastest_speeds
-from arm_control.control.trajectory.path import BlendedPath, FINE_GRID, grid_for
-from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
-from arm_control.control.trajectory.timing import check
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.plan_worker import _Incoming, PlanWorker
 from arm_control.planning.planner import poses_from_waypoints, waypoints_from_poses
+from arm_control.timing import (bus, exact, refined_trajectory, time_optimal_trajectory,
+                                TrajectoryLimits)
+from arm_control.timing.bus import compile_kernels, exact_timing
+from arm_control.timing.exact import fastest_speeds
+from arm_control.timing.path import BlendedPath, FINE_GRID, grid_for
+from arm_control.timing.rows import PathTerms, rows, speed_caps
+from arm_control.timing.timing import check
 
 STEP_RAD = 0.001745
 PATHS = {

@@ -16,12 +16,12 @@ from trajectory_checks import (dense, follow_open_loop, PATHS, STEP_RAD, VOLTAGE
 
 from arm_control import config
 from arm_control.config import Rectangle
-from arm_control.control.trajectory import (BlendedPath, time_optimal_trajectory, Trajectory,
-                                            TrajectoryError, TrajectoryLimits)
-from arm_control.control.trajectory.path import initial_radii
-from arm_control.control.trajectory.rows import PathTerms
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.world import ForbiddenSpace
+from arm_control.timing import (BlendedPath, time_optimal_trajectory, Trajectory, TrajectoryError,
+                                TrajectoryLimits)
+from arm_control.timing.path import initial_radii
+from arm_control.timing.rows import PathTerms
 
 
 @pytest.fixture(scope='module')

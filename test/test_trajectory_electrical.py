@@ -15,11 +15,10 @@ import pytest
 from test_trajectory import follow_open_loop, PATHS, worst_over_limits
 
 from arm_control import config
-from arm_control.control.trajectory import (time_optimal_trajectory, TrajectoryError,
-                                            TrajectoryLimits)
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.electrical import PowerSupply
 from arm_control.model.world import ForbiddenSpace
+from arm_control.timing import (time_optimal_trajectory, TrajectoryError, TrajectoryLimits)
 
 # The fastest moves of test_trajectory's paths, and one that swings the whole arm over.
 HEAVY = ['front over the top to the back', 'three corners', 'up to the front']

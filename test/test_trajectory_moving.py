@@ -9,16 +9,15 @@ from trajectory_checks import (dense, follow_open_loop, PATHS, trajectory_voltag
                                VOLTAGE_TOLERANCE, worst_over_limits)
 
 from arm_control import config
-from arm_control.control.trajectory import (BlendedPath, estimated_duration_s,
-                                            sure_acceleration_rad_s2, time_optimal_trajectory,
-                                            TrajectoryLimits)
-from arm_control.control.trajectory.moving_start import piece_duration, time_moving
-from arm_control.control.trajectory.path import FINE_GRID, grid_for
-from arm_control.control.trajectory.rows import PathTerms
-from arm_control.control.trajectory.timing import time_from_rest
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.electrical import PowerSupply
 from arm_control.model.world import ForbiddenSpace
+from arm_control.timing import (BlendedPath, estimated_duration_s, sure_acceleration_rad_s2,
+                                time_optimal_trajectory, TrajectoryLimits)
+from arm_control.timing.moving_start import piece_duration, time_moving
+from arm_control.timing.path import FINE_GRID, grid_for
+from arm_control.timing.rows import PathTerms
+from arm_control.timing.timing import time_from_rest
 
 
 @pytest.fixture(scope='module')

@@ -30,7 +30,6 @@ import numpy as np
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.driver import DriverMode
 from arm_control.control.events import EventKind as Kind, EventLog
-from arm_control.control.feedforward import PeriodFeedforward
 from arm_control.control.goal_runner import GoalRunner
 from arm_control.control.motions import Motion, Setpoints
 from arm_control.control.pid import ArmPid
@@ -39,6 +38,7 @@ from arm_control.control.safety import LEAVES_UNTIL_REACHED, SafetyRules, sure_l
 from arm_control.control.sensing import Sensing
 from arm_control.control.state_machine import (ArmState as S, COMMANDING, StateMachine,
                                                STOPPED, Trigger as T)
+from arm_control.model.feedforward import PeriodFeedforward
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.text import quote
 

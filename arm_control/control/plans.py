@@ -29,13 +29,13 @@ import numpy as np
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.goals import Goal, GoalValidator
 from arm_control.control.motions import ChainedTrajectory
-from arm_control.control.trajectory import (estimated_bent_duration_s, estimated_duration_s,
-                                            refined_trajectory, time_optimal_trajectory,
-                                            Trajectory, TrajectoryError, TrajectoryLimits)
-from arm_control.control.trajectory.shaping import prove_room_cells
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
+from arm_control.timing import (estimated_bent_duration_s, estimated_duration_s,
+                                refined_trajectory, time_optimal_trajectory, Trajectory,
+                                TrajectoryError, TrajectoryLimits)
+from arm_control.timing.shaping import prove_room_cells
 
 # Branches whose quick estimate is within this fraction of the best one's are timed in full.
 BRANCH_SCREEN_MARGIN = 0.25

@@ -22,8 +22,8 @@ import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.motions import HoldTrajectory, Motion, StraightMove, StraightStop
-from arm_control.control.trajectory import sure_acceleration_rad_s2, TrajectoryLimits
 from arm_control.model.world import ForbiddenSpace
+from arm_control.timing import sure_acceleration_rad_s2, TrajectoryLimits
 
 # A joint past its limit by more than this (or 6 potentiometer sigmas) e-stops the arm.
 JOINT_LIMIT_MARGIN_RAD = 0.01

@@ -41,9 +41,9 @@ import numpy as np
 from arm_control.config import ArmConfig
 from arm_control.control.goals import Goal
 from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
-from arm_control.control.trajectory.bus import compile_kernels
-from arm_control.control.trajectory.moving_start import toppra_solver
 from arm_control.realtime import raised
+from arm_control.timing.bus import compile_kernels
+from arm_control.timing.moving_start import toppra_solver
 
 
 # The refinement's hand-over comes this many times its expected time after the quick

@@ -40,11 +40,11 @@ from arm_control import realtime
 from arm_control.config import ArmConfig, FRAME_ID, PlannerConfig
 from arm_control.control.goals import PLANE_TOLERANCE_M
 from arm_control.control.plans import BranchRanking, PresetAnswers
-from arm_control.control.trajectory.bus import compile_kernels
 from arm_control.nodes import messages
 from arm_control.nodes.common import declare_parameters, LATCHED, run, status
 from arm_control.planning.planner import Planner, poses_from_waypoints
 from arm_control.text import quote
+from arm_control.timing.bus import compile_kernels
 
 CSPACE_FRAME = 'cspace'
 POSE_TOLERANCE_M = 0.001          # a start pose must be a pose of this arm within this

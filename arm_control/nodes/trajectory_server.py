@@ -28,11 +28,10 @@ from arm_control.control.joint_trajectory import (ErrorCode, JointTolerance, Tra
                                                   TrajectoryRefused, TrajectoryRequest)
 from arm_control.control.motions import Motion
 from arm_control.control.state_machine import STOPPED
-from arm_control.control.trajectory.bus import compile_kernels
-from arm_control.control.trajectory_goals import (FollowSettings, TrajectoryGoals,
-                                                  TrajectoryWatch)
+from arm_control.control.trajectory_goals import FollowSettings, TrajectoryGoals, TrajectoryWatch
 from arm_control.nodes import messages
 from arm_control.nodes.common import COMMANDS, guarded
+from arm_control.timing.bus import compile_kernels
 
 try:
     from control_msgs.action import FollowJointTrajectory

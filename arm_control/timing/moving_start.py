@@ -18,11 +18,11 @@ import math
 
 import numpy as np
 
-from arm_control.control.trajectory.bus import along, bus_profile, BusSag, safe
-from arm_control.control.trajectory.limits import TrajectoryLimits
-from arm_control.control.trajectory.path import BlendedPath
-from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
 from arm_control.model.dynamics import ArmDynamics
+from arm_control.timing.bus import along, bus_profile, BusSag, safe
+from arm_control.timing.limits import TrajectoryLimits
+from arm_control.timing.path import BlendedPath
+from arm_control.timing.rows import PathTerms, rows, speed_caps
 
 # Path-speed floor for the back-EMF linearisation (ṡ in rad/s of path): √x₀ never below this.
 _SPEED_FLOOR = 1e-3

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from arm_control.control.trajectory.limits import TrajectoryError
-from arm_control.control.trajectory.path import BlendedPath
+from arm_control.timing.limits import TrajectoryError
+from arm_control.timing.path import BlendedPath
 
 
 @dataclass

@@ -18,14 +18,14 @@ import math
 import numpy as np
 
 from arm_control.config import ArmConfig
-from arm_control.control.trajectory.bus import bus_timing, exact_timing, under_the_bus
-from arm_control.control.trajectory.exact import durations, fastest_speeds
-from arm_control.control.trajectory.limits import TrajectoryLimits
-from arm_control.control.trajectory.path import (BlendedPath, BUS_GRID, clustered, forbidden_at,
-                                                 grid_for, shape_terms)
-from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.world import ForbiddenSpace
+from arm_control.timing.bus import bus_timing, exact_timing, under_the_bus
+from arm_control.timing.exact import durations, fastest_speeds
+from arm_control.timing.limits import TrajectoryLimits
+from arm_control.timing.path import (BlendedPath, BUS_GRID, clustered, forbidden_at, grid_for,
+                                     shape_terms)
+from arm_control.timing.rows import PathTerms, rows, speed_caps
 
 # Harmonics per joint, the first batch's grid (per joint, odd: it holds 0) and span (± this
 # times the path length), the refinement steps (times the length) and how many of them try

@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from arm_control.control.trajectory.limits import TrajectoryError
 from arm_control.model.world import ForbiddenSpace
+from arm_control.timing.limits import TrajectoryError
 
 # Corners that turn by more than this (a near reversal) always stop rather than blend.
 MAX_BLEND_TURN_RAD = math.radians(175.0)

@@ -17,14 +17,13 @@ import math
 
 import numpy as np
 
-from arm_control.control.trajectory.bus import (along, bus_profile, exact_timing,
-                                                FINE_BUS_ITERATIONS, QUICK_AFTER_FIT,
-                                                under_the_bus)
-from arm_control.control.trajectory.limits import TrajectoryError, TrajectoryLimits
-from arm_control.control.trajectory.moving_start import time_moving
-from arm_control.control.trajectory.rows import PathTerms
-from arm_control.control.trajectory.timed import Piece, Trajectory
 from arm_control.model.dynamics import ArmDynamics
+from arm_control.timing.bus import (along, bus_profile, exact_timing, FINE_BUS_ITERATIONS,
+                                    QUICK_AFTER_FIT, under_the_bus)
+from arm_control.timing.limits import TrajectoryError, TrajectoryLimits
+from arm_control.timing.moving_start import time_moving
+from arm_control.timing.rows import PathTerms
+from arm_control.timing.timed import Piece, Trajectory
 
 VOLTAGE_TOLERANCE = 0.05           # V past a window the final check accepts (grid error)
 TIGHTENINGS = 5                    # retimings after a failed check before time is stretched

@@ -21,8 +21,8 @@ Coulomb friction enters as c·sign(q'), its value at speed, or as its tanh at gi
 
 import numpy as np
 
-from arm_control.control.trajectory.limits import TrajectoryLimits, window
 from arm_control.model.dynamics import ArmDynamics, COULOMB_SMOOTHING_RAD_S
+from arm_control.timing.limits import TrajectoryLimits, window
 
 # A window never narrower than this (V) in the rows: a bus sagging to nothing is refused by
 # the final check, not divided by.

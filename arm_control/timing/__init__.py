@@ -13,7 +13,7 @@ impose the same rows (``rows``) through the one model of the arm, ``ArmDynamics`
 each joint's V within the bus less the reserves and V − e·q̇ within I_limit·R less the
 reserves, the bus sagging under the trajectory's own draw (``bus``). The result is checked
 on dense samples with the exact model and the exact electrical model, and tightened until it
-passes (``timing``). ``PeriodFeedforward`` (``arm_control.control.feedforward``) turns the
+passes (``timing``). ``PeriodFeedforward`` (``arm_control.model.feedforward``) turns the
 trajectory into the voltage a control loop holds over each period.
 """
 
@@ -22,23 +22,20 @@ import math
 
 import numpy as np
 
-from arm_control.control.feedforward import PeriodFeedforward
-from arm_control.control.trajectory.exact import durations, fastest_speeds
-from arm_control.control.trajectory.limits import TrajectoryError, TrajectoryLimits
-from arm_control.control.trajectory.moving_start import stopping_distance
-from arm_control.control.trajectory.path import (BlendedPath, clean_waypoints, clustered,
-                                                 COARSE_GRID, FINE_GRID, free_blends,
-                                                 free_length, grid_for, initial_radii,
-                                                 QUICK_GRID, split_at_stops, turn_angle,
-                                                 unit)
-from arm_control.control.trajectory.rows import PathTerms, rows, speed_caps
-from arm_control.control.trajectory.shaping import (best_shape, faster_shape, free_shape,
-                                                    SEARCH_STAGES)
-from arm_control.control.trajectory.timed import Trajectory
-from arm_control.control.trajectory.timing import time_piece, TimedPiece, verified
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.electrical import PowerSupply
+from arm_control.model.feedforward import PeriodFeedforward
 from arm_control.model.world import ForbiddenSpace
+from arm_control.timing.exact import durations, fastest_speeds
+from arm_control.timing.limits import TrajectoryError, TrajectoryLimits
+from arm_control.timing.moving_start import stopping_distance
+from arm_control.timing.path import (BlendedPath, clean_waypoints, clustered, COARSE_GRID,
+                                     FINE_GRID, free_blends, free_length, grid_for, initial_radii,
+                                     QUICK_GRID, split_at_stops, turn_angle, unit)
+from arm_control.timing.rows import PathTerms, rows, speed_caps
+from arm_control.timing.shaping import (best_shape, faster_shape, free_shape, SEARCH_STAGES)
+from arm_control.timing.timed import Trajectory
+from arm_control.timing.timing import time_piece, TimedPiece, verified
 
 __all__ = ['BlendedPath', 'estimated_bent_duration_s', 'estimated_duration_s',
            'PeriodFeedforward',

@@ -14,12 +14,11 @@ import math
 import numba
 import numpy as np
 
-from arm_control.control.trajectory.exact import compile_passes, kernel_array, OnePath
-from arm_control.control.trajectory.limits import TrajectoryLimits, window
-from arm_control.control.trajectory.path import BUS_GRID, grid_for
-from arm_control.control.trajectory.rows import (LEAST_HALF_WIDTH_V, PathTerms, rows,
-                                                 speed_caps)
 from arm_control.model.dynamics import COULOMB_SMOOTHING_RAD_S
+from arm_control.timing.exact import compile_passes, kernel_array, OnePath
+from arm_control.timing.limits import TrajectoryLimits, window
+from arm_control.timing.path import BUS_GRID, grid_for
+from arm_control.timing.rows import (LEAST_HALF_WIDTH_V, PathTerms, rows, speed_caps)
 
 BUS_ITERATIONS = 16
 # The bus is found on a coarse grid first, then only raised where it falls short, in at
