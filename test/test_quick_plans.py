@@ -226,7 +226,7 @@ def test_a_refinement_in_time_takes_over_at_its_hand_over(arm, planner):
     for t in (switch, switch + 0.2):
         np.testing.assert_allclose(setpoints.sample(t)[0],
                                    refined.trajectory.sample(t - switch)[0])
-    assert loop.core.goals.latency_s['trajectory'] == pytest.approx(
+    assert loop.core.goals.latency.trajectory_s == pytest.approx(
         handover + refined.trajectory.duration_s)
     assert loop.run(5.0, lambda: loop.core.goals.counts['reached'] == 1)
     assert loop.lowest_m == 0.0
@@ -239,7 +239,7 @@ def test_a_late_refinement_is_ignored_and_a_later_one_still_taken(arm, planner):
     later = motion.begin_s + 0.3
     np.testing.assert_allclose(loop.core.setpoints.sample(later)[0],
                                quick.trajectory.sample(later - motion.begin_s)[0])
-    assert loop.core.goals.latency_s['a refinement too late by'] > 0.0
+    assert loop.core.goals.latency.refinement_too_late_by_s > 0.0
     retry = loop.core.plan_timer.refine(quick, 0.2)         # the worker's second try
     loop.core.on_timed_plan(motion.begin_s + 0.15, retry)
     np.testing.assert_allclose(loop.core.setpoints.sample(later)[0],

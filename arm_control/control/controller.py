@@ -22,6 +22,7 @@ benchmarks in simulated time) the core plans and times in its own step. No plan 
 ``planner_timeout_s``: the goal fails with the reason -- never a blind move.
 """
 
+from dataclasses import replace
 import math
 from typing import Optional
 
@@ -297,7 +298,8 @@ class ArmController:
             motion.delay(delay_s)
             self.waited_s += delay_s
             self.feedforward.reset()                # its reference restarts on the motion
-            self.goals.latency_s['waiting for the arm'] = self.waited_s     # said on arrival
+            self.goals.latency = replace(self.goals.latency,        # said on arrival
+                                         waiting_for_the_arm_s=self.waited_s)
 
     def _leave_motion(self, now_s: float) -> bool:
         """Far off the motion it follows to a goal (its commands held up on the way, as DDS

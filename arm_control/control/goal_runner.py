@@ -9,6 +9,7 @@ once from rest may be refined later (``PlanTimer.refine``): the refinement takes
 its motion at the hand-over time when it comes before then, else the motion carries on.
 """
 
+from dataclasses import dataclass, fields, replace
 import math
 from typing import Optional
 
@@ -18,7 +19,7 @@ from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.events import EventKind as Kind, EventLog
 from arm_control.control.goals import Goal, GoalQueue, GoalValidator
 from arm_control.control.motions import Motion, Setpoints, StoppingMotion, StraightStop
-from arm_control.control.plans import PlanHandoff, PlanRequest, TimedPlan
+from arm_control.control.plans import PlanHandoff, PlanRequest, TimedPlan, Verdict
 from arm_control.control.state_machine import ArmState as S, StateMachine, Trigger as T
 from arm_control.text import quote
 
@@ -27,6 +28,27 @@ from arm_control.text import quote
 PREEMPT_LEAD_S = 0.1
 # A refinement takes over only when it comes at least this long before its hand-over time.
 HANDOVER_MARGIN_S = 0.002
+
+
+@dataclass(frozen=True)
+class GoalLatency:
+    """Where the time went for the last goal taken, in seconds; NaN where a step did not
+    happen (a goal from a kept trajectory is not timed; most are never refined)."""
+
+    planner_round_trip_s: float = math.nan
+    timing_s: float = math.nan              # the worker timing the path
+    kept_trajectory_s: float = math.nan     # ... or taking a trajectory timed ahead
+    handover_s: float = math.nan            # the answer's way back to the core
+    waiting_to_start_s: float = math.nan    # until the current motion ends
+    trajectory_s: float = math.nan          # the motion itself
+    refinement_s: float = math.nan          # timing the refined rest of the motion
+    refinement_too_late_by_s: float = math.nan
+    waiting_for_the_arm_s: float = math.nan  # the motion held back for an arm behind it
+
+    def items(self) -> list[tuple[str, float]]:
+        """(what, seconds) of the steps that happened, for people."""
+        return [(field.name.removesuffix('_s').replace('_', ' '), getattr(self, field.name))
+                for field in fields(self) if math.isfinite(getattr(self, field.name))]
 
 
 class GoalRunner:
@@ -46,7 +68,7 @@ class GoalRunner:
         self.counts = dict.fromkeys(('queued', 'started', 'rejected', 'reached', 'failed'), 0)
         self.planner_available: Optional[bool] = None    # as the node's client sees it
         self.planner_ever_seen = False
-        self.latency_s: dict[str, float] = {}             # of the last goal taken: where ...
+        self.latency = GoalLatency()                    # of the last goal taken
 
     # ------------------------------------------------------------------ goals in
 
@@ -141,7 +163,7 @@ class GoalRunner:
         self.setpoints.schedule(motion)
         self.goal_q = motion.final_q
         self.machine.fire(T.PLAN_READY)
-        self.latency_s = {'trajectory': motion.end_s - motion.begin_s}
+        self.latency = GoalLatency(trajectory_s=motion.end_s - motion.begin_s)
         return self._accept(now_s, Kind.GOAL_ACCEPTED, f'{goal.label} accepted{goal.note}' +
                             (f'; {dropped} earlier goals dropped' if dropped else ''))
 
@@ -173,25 +195,24 @@ class GoalRunner:
             self._refine(now_s, timed)
             return
         last = self.setpoints.timeline.last
-        verdict, value = self.plans.answer(now_s, timed, -math.inf if last is None
-                                           else last.end_s)
-        if verdict == 'fail' and timed.request.start_time_s is not None \
+        answer = self.plans.answer(now_s, timed, -math.inf if last is None else last.end_s)
+        if answer.verdict is Verdict.FAIL and timed.request.start_time_s is not None \
                 and isinstance(last, (StraightStop, StoppingMotion)):
             # Braking to rest (cancelled, off its plan, back from a stall, out of driver
             # mode), or at rest since: none from the moving arm, so one from where it comes
             # to rest, so that a goal sent just after a cancel is not lost.
             self.ask(now_s, timed.request.goal, rest_q, max(last.end_s - now_s, 0.0) + 1e-6)
-        elif verdict == 'fail':
-            self.fail(now_s, value)
-        elif verdict == 'retry':
-            self.ask(now_s, timed.request.goal, rest_q, value)
-        elif verdict == 'take':
-            motion = Motion(timed.trajectory, value)
+        elif answer.verdict is Verdict.FAIL:
+            self.fail(now_s, answer.reason)
+        elif answer.verdict is Verdict.RETRY:
+            self.ask(now_s, timed.request.goal, rest_q, answer.lead_s)
+        elif answer.verdict is Verdict.TAKE:
+            motion = Motion(timed.trajectory, answer.begin_s)
             self.setpoints.schedule(motion)
             self.refinable = (timed.request.request_id, motion)
             self.goal_q = motion.final_q
             self.machine.fire(T.PLAN_READY)
-            self.latency_s = self._latency(now_s, timed, value)
+            self.latency = self._latency(now_s, timed, answer.begin_s)
 
     def _refine(self, now_s: float, timed: TimedPlan) -> None:
         """The refinement takes over from its motion at the hand-over time, if that motion
@@ -203,24 +224,26 @@ class GoalRunner:
             return
         begin_s = motion.begin_s + timed.handover_s
         if now_s > begin_s - HANDOVER_MARGIN_S:     # too late: the quick trajectory carries on
-            self.latency_s['a refinement too late by'] = now_s - (begin_s - HANDOVER_MARGIN_S)
+            self.latency = replace(self.latency, refinement_too_late_by_s=now_s - (
+                begin_s - HANDOVER_MARGIN_S))
             return
         refined = Motion(timed.trajectory, begin_s)
         self.setpoints.schedule(refined)
         self.refinable = None
         self.goal_q = refined.final_q
-        self.latency_s.update({'refinement': timed.compute_s,
-                               'trajectory': timed.handover_s + timed.trajectory.duration_s})
+        self.latency = replace(self.latency, refinement_s=timed.compute_s,
+                               trajectory_s=timed.handover_s + timed.trajectory.duration_s)
 
-    def _latency(self, now_s: float, timed: TimedPlan, begin_s: float) -> dict[str, float]:
+    def _latency(self, now_s: float, timed: TimedPlan, begin_s: float) -> GoalLatency:
         """Where the time went between asking for the plan and the motion's start."""
         asked = timed.request.sent_time_s
         answered = timed.answered_s if math.isfinite(timed.answered_s) else asked
         received = timed.received_s if math.isfinite(timed.received_s) else now_s
-        timing = 'kept trajectory' if timed.kept else 'timing'     # KeptTrajectories
-        return {'planner round trip': answered - asked, timing: timed.compute_s,
-                'hand-over': max(received - answered - timed.compute_s, 0.0),
-                'waiting to start': begin_s - received, 'trajectory': timed.trajectory.duration_s}
+        return GoalLatency(
+            planner_round_trip_s=answered - asked,
+            **{'kept_trajectory_s' if timed.kept else 'timing_s': timed.compute_s},
+            handover_s=max(received - answered - timed.compute_s, 0.0),
+            waiting_to_start_s=begin_s - received, trajectory_s=timed.trajectory.duration_s)
 
     def fail(self, now_s: float, reason: str) -> None:
         self.plans.drop()
@@ -295,7 +318,7 @@ class GoalRunner:
         self.counts['reached'] += 1
         goal = self.queue.finish()
         went = ', '.join(f'{name} {1000 * seconds:.1f} ms' for name, seconds in
-                         self.latency_s.items())
+                         self.latency.items())
         self.events.say(now_s, Kind.GOAL_REACHED, 'info',
                         f'reached {goal.label} {now_s - self.plans.started_s:.2f} s after '
                         f'starting it (error {error[0]:+.2f}, {error[1]:+.2f} deg; {went})')

@@ -35,7 +35,7 @@ def diagnostics(core, now_s: float) -> dict:
         'tracking error (deg)': [round(math.degrees(e), 3) for e in core.tracking_error_rad],
         'e-stops': core.estops,
         **{f'goals {k}': v for k, v in core.goals.counts.items()},
-        **{f'last goal: {k} (ms)': f'{1000 * v:.1f}' for k, v in core.goals.latency_s.items()},
+        **{f'last goal: {k} (ms)': f'{1000 * v:.1f}' for k, v in core.goals.latency.items()},
     }
 
 

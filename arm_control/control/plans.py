@@ -20,6 +20,7 @@ time and ends sooner. The user waits only for the first.
 
 from collections import OrderedDict
 from dataclasses import dataclass, replace
+from enum import Enum
 import math
 import time
 from typing import Optional
@@ -420,22 +421,35 @@ class PlanHandoff:
     def overdue(self, now_s: float) -> bool:
         return self.pending is not None and now_s > self.deadline_s
 
-    def answer(self, now_s: float, timed: TimedPlan, idle_from_s: float):
-        """What ``timed`` means now: ('ignore', None) for an answer to an older request,
-        ('fail', reason), ('retry', lead_s) when it came too late to take over the moving
-        arm but there is time to ask again, or ('take', begin_s). ``idle_from_s``: when the
-        current motion ends (a plan from rest begins then at the earliest)."""
+    def answer(self, now_s: float, timed: TimedPlan, idle_from_s: float) -> 'PlanAnswer':
+        """What ``timed`` means now (see ``Verdict``). ``idle_from_s``: when the current
+        motion ends (a plan from rest begins then at the earliest)."""
         request = timed.request
         if self.pending is None or request.request_id != self.pending.request_id:
-            return 'ignore', None
+            return PlanAnswer(Verdict.IGNORE)
         self.pending, self.last = None, timed
         if not timed.ok:
-            return 'fail', timed.reason
+            return PlanAnswer(Verdict.FAIL, reason=timed.reason)
         if request.start_time_s is None:
-            return 'take', max(now_s, idle_from_s)
+            return PlanAnswer(Verdict.TAKE, begin_s=max(now_s, idle_from_s))
         if now_s <= request.start_time_s:
-            return 'take', request.start_time_s
+            return PlanAnswer(Verdict.TAKE, begin_s=request.start_time_s)
         if now_s + 2.0 * request.lead_s > self.deadline_s:
-            return 'fail', (f'the plan for {request.goal.label} came too late to take over '
-                            'the moving arm')
-        return 'retry', 2.0 * request.lead_s
+            return PlanAnswer(Verdict.FAIL, reason=f'the plan for {request.goal.label} came '
+                                                   'too late to take over the moving arm')
+        return PlanAnswer(Verdict.RETRY, lead_s=2.0 * request.lead_s)
+
+
+class Verdict(Enum):
+    IGNORE = 'ignore'   # an answer to an older request
+    FAIL = 'fail'       # no plan, or one too late to take over the moving arm: ``reason``
+    RETRY = 'retry'     # too late to take over, but there is time to ask again: ``lead_s``
+    TAKE = 'take'       # the plan begins at ``begin_s``
+
+
+@dataclass(frozen=True)
+class PlanAnswer:
+    verdict: Verdict
+    begin_s: float = math.nan
+    lead_s: float = math.nan
+    reason: str = ''
