@@ -19,6 +19,7 @@ import pytest
 from arm_control import config
 from arm_control.control.closed_loop import ClosedLoop
 from arm_control.control.goals import Goal
+from arm_control.control.plan_messages import Keeping, KeepPath, TimePlan
 from arm_control.control.plans import (BranchRanking, KeptTrajectories, PathPlan, PlanRequest,
                                        PlanTimer, preset_pairs)
 from arm_control.model.dynamics import ArmDynamics
@@ -353,12 +354,14 @@ def test_the_worker_sees_a_newer_goal_behind_a_path_for_the_keeper_only():
     presets sent for the keeper meanwhile is not one, and nothing is lost by looking."""
     receiving, sending = multiprocessing.Pipe(duplex=False)
     incoming = _Incoming(receiving)
-    sending.send(('keep', 'request', 'plan'))
+    sending.send(KeepPath('request', 'plan'))
+    sending.send(Keeping(False))
     assert not incoming.newer()
-    sending.send(('request', 'plan'))
+    sending.send(TimePlan('request', 'plan'))
     assert incoming.newer()
-    assert incoming.next() == ('keep', 'request', 'plan')
-    assert incoming.next() == ('request', 'plan')
+    assert incoming.next() == KeepPath('request', 'plan')
+    assert incoming.next() == Keeping(False)
+    assert incoming.next() == TimePlan('request', 'plan')
     assert not incoming.waiting
 
 

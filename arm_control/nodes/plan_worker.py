@@ -38,8 +38,10 @@ import time
 
 import numpy as np
 
-from arm_control.config import ArmConfig
 from arm_control.control.goals import Goal
+from arm_control.control.plan_messages import (Done, KeeperJob, KeeperResult, KeeperSettings,
+                                               Keeping, KeepPath, Kept, Ready, Settings,
+                                               TimePlan)
 from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
 from arm_control.realtime import raised
 from arm_control.timing.bus import compile_kernels
@@ -83,12 +85,9 @@ class HandoverClock:
 
 
 def _serve(requests: Connection, results: Connection) -> None:
-    """The worker: (arm, config) first, then time each (request, plan) that comes in and
-    send back the TimedPlan (from rest: the quick one, then its refinement), then the
-    request's id: done with it; ('keep', request, plan): a path between presets, for the
-    keeper only; ('keeping', bool): whether the keeper may work now; new (arm, config) when
-    the settings change at run time. What the keeper sends back is kept, and the count sent
-    as ('kept', count)."""
+    """The worker (``plan_messages``): times each plan with the latest ``Settings``, the
+    answers from rest in two (the quick one, then its refinement), then says the request
+    ``Done``; hands the keeper the paths worth keeping and keeps what it times."""
     timer = None
     clock = HandoverClock()
     incoming = _Incoming(requests)
@@ -100,36 +99,35 @@ def _serve(requests: Connection, results: Connection) -> None:
                     and requests not in wait([requests, keeper.results]):
                 done = keeping.take()
                 if done is not None:
-                    timer.kept.add(*done)
-                    results.send(('kept', len(timer.kept)))
+                    timer.kept.add(done.request, done.plan, done.trajectory, done.pinned)
+                    results.send(Kept(len(timer.kept)))
                 continue
-            item = incoming.next()
-            if item is None:
-                return
-            if isinstance(item[0], ArmConfig):
-                first = timer is None
-                timer = PlanTimer(*item)
-                keeping.retune(item)
-                results.send(('kept', 0))
-                if first:
-                    # Ready once warm: the moving-start solver imported and a first move
-                    # timed, so that the first goal waits for neither (on a starved machine
-                    # both take seconds).
-                    importing = threading.Thread(target=toppra_solver, daemon=True)
-                    importing.start()
-                    _warm_up(timer, clock)
-                    importing.join()
-                    results.send(None)                      # ready
-            elif item[0] == 'keeping':
-                keeping.allow(item[1])
-            elif item[0] == 'keep':
-                if timer.kept.find(*item[1:], touch=False) is None:
-                    keeping.send(*item[1:], pinned=True)
-            else:
-                request, plan = item
-                if _answer(timer, clock, request, plan, results.send, incoming.newer):
-                    keeping.send(request, plan, pinned=False)
-                results.send(request.request_id)
+            match incoming.next():
+                case None:
+                    return
+                case Settings(arm, config) as settings:
+                    first = timer is None
+                    timer = PlanTimer(arm, config)
+                    keeping.retune(settings)
+                    results.send(Kept(0))
+                    if first:
+                        # Ready once warm: the moving-start solver imported and a first move
+                        # timed, so that the first goal waits for neither (on a starved
+                        # machine both take seconds).
+                        importing = threading.Thread(target=toppra_solver, daemon=True)
+                        importing.start()
+                        _warm_up(timer, clock)
+                        importing.join()
+                        results.send(Ready())
+                case Keeping(allowed):
+                    keeping.allow(allowed)
+                case KeepPath(request, plan):
+                    if timer.kept.find(request, plan, touch=False) is None:
+                        keeping.send(request, plan, pinned=True)
+                case TimePlan(request, plan):
+                    if _answer(timer, clock, request, plan, results.send, incoming.newer):
+                        keeping.send(request, plan, pinned=False)
+                    results.send(Done(request.request_id))
     except (EOFError, OSError):     # the node is gone
         return
     finally:
@@ -146,7 +144,7 @@ class _Keeping:
         self.gone = False                   # could not start, or ended: nothing more kept
         self.generation, self.settings, self.working = 0, None, True
 
-    def retune(self, settings) -> None:
+    def retune(self, settings: Settings) -> None:
         self.generation, self.settings = self.generation + 1, settings
         if self.keeper is not None:
             self.keeper.settings(self.generation, settings)
@@ -164,20 +162,20 @@ class _Keeping:
                 self.keeper.settings(self.generation, self.settings)
                 self.keeper.allow(self.working)
         if self.keeper is not None:
-            self.keeper.send((self.generation, request, plan, pinned))
+            self.keeper.send(KeeperJob(self.generation, request, plan, pinned))
 
-    def take(self):
-        """(request, plan, trajectory, pinned) the keeper timed with these settings, or None
-        (older settings; or it has ended)."""
+    def take(self) -> KeeperResult | None:
+        """What the keeper timed with these settings, or None (older settings; or it has
+        ended)."""
         try:
-            generation, *done = self.keeper.results.recv()
+            done = self.keeper.results.recv()
         except (EOFError, OSError):
             print('plan worker: the keeper process ended; fine trajectories are no longer kept',
                   file=sys.stderr, flush=True)
             self.close()
             self.gone = True
             return None
-        return done if generation == self.generation else None
+        return done if done.generation == self.generation else None
 
     def close(self) -> None:
         if self.keeper is not None:
@@ -203,7 +201,7 @@ class _Incoming:
     def newer(self) -> bool:
         while self.connection.poll():
             self.read.append(self.connection.recv())
-        return any(item is None or item[0] not in ('keep', 'keeping') for item in self.read)
+        return any(not isinstance(item, (KeepPath, Keeping)) for item in self.read)
 
 
 class _Keeper:
@@ -234,11 +232,11 @@ class _Keeper:
             self._outbox.append(item)
             self._changed.notify()
 
-    def settings(self, generation: int, settings) -> None:
+    def settings(self, generation: int, settings: Settings) -> None:
         """New settings: the paths still waiting were for the old ones."""
         with self._changed:
             self._outbox.clear()
-            self._outbox.append(('settings', generation, settings))
+            self._outbox.append(KeeperSettings(generation, settings))
             self._changed.notify()
 
     def _send(self) -> None:
@@ -270,33 +268,33 @@ class _Keeper:
 
 
 def _keep(requests: Connection, results: Connection) -> None:
-    """The keeper: ('settings', generation, (arm, config)), then (generation, request, plan,
-    pinned) to time finely from rest, the latest first; sends back (generation, request,
-    plan, trajectory, pinned) for each it could time."""
+    """The keeper: times each ``KeeperJob`` finely from rest, the latest first, with the
+    latest ``KeeperSettings``, and sends back a ``KeeperResult`` for each it could time."""
     timer, generation, waiting = None, 0, []
     while True:
         try:
             while not waiting or requests.poll():
-                item = requests.recv()
-                if item is None:
-                    return
-                if item[0] == 'settings':
-                    _, generation, settings = item
-                    timer, waiting = PlanTimer(*settings), []
-                else:
-                    waiting = (waiting + [item])[-KEEPER_QUEUE:]
+                match requests.recv():
+                    case None:
+                        return
+                    case KeeperSettings(new, settings):
+                        generation, waiting = new, []
+                        timer = PlanTimer(settings.arm, settings.config)
+                    case KeeperJob() as job:
+                        waiting = (waiting + [job])[-KEEPER_QUEUE:]
         except (EOFError, OSError):
             return
-        item_generation, request, plan, pinned = waiting.pop()
-        if item_generation != generation:
+        job = waiting.pop()
+        if job.generation != generation:
             continue
         try:
-            trajectory = timer.fine_from_rest(request, plan)
+            trajectory = timer.fine_from_rest(job.request, job.plan)
         except Exception:                   # that path is timed afresh each time
             trajectory = None
         if trajectory is not None:
             try:
-                results.send((generation, request, plan, trajectory, pinned))
+                results.send(KeeperResult(generation, job.request, job.plan, trajectory,
+                                          job.pinned))
             except OSError:                 # the worker is gone
                 return
 
@@ -412,17 +410,17 @@ class PlanWorker:
     def submit(self, request: PlanRequest, plan: PathPlan) -> None:
         with self._send_lock:
             self._open += 1
-            self._child.requests.send((request, plan))
+            self._child.requests.send(TimePlan(request, plan))
 
     def allow_keeping(self, working: bool) -> None:
         """Let the keeper work (the arm holds, or has no goal), or stop it until then (a goal
         is being planned or followed): it never takes CPU from a moving arm."""
-        self._send_for_keeper(('keeping', bool(working)))
+        self._send_for_keeper(Keeping(bool(working)))
 
     def keep(self, request: PlanRequest, plan: PathPlan) -> None:
         """Have ``plan`` kept from rest before it is asked for (a path between presets, kept
         for good)."""
-        self._send_for_keeper(('keep', request, plan))
+        self._send_for_keeper(KeepPath(request, plan))
 
     def _send_for_keeper(self, item) -> None:
         """Nothing when the worker is gone: keeping is optional."""
@@ -439,23 +437,24 @@ class PlanWorker:
     def retune(self, arm, config) -> None:
         """Time the plans that come after this with these settings."""
         with self._send_lock:
-            self._child.requests.send((arm, config))
+            self._child.requests.send(Settings(arm, config))
 
     def _receive(self) -> None:
         while True:
             try:
-                timed = self._child.results.recv()
+                message = self._child.results.recv()
             except (EOFError, OSError):
                 return
-            if timed is None:
-                self.ready.set()
-            elif isinstance(timed, int):            # done with that request
-                with self._send_lock:
-                    self._open -= 1
-            elif isinstance(timed, tuple):          # ('kept', count)
-                self.kept = timed[1]
-            else:
-                self.on_timed(timed)
+            match message:
+                case Ready():
+                    self.ready.set()
+                case Done():
+                    with self._send_lock:
+                        self._open -= 1
+                case Kept(count):
+                    self.kept = count
+                case TimedPlan():
+                    self.on_timed(message)
 
     @property
     def alive(self) -> bool:
