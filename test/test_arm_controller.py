@@ -17,7 +17,7 @@ from arm_control import config
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.goals import StraightLinePlanner
-from arm_control.control.plans import PlanRequest
+from arm_control.control.plan_messages import PlanRequest
 from arm_control.control.state_machine import ArmState
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics

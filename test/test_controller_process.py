@@ -20,7 +20,7 @@ from std_srvs.srv import SetBool, Trigger
 from arm_control import config, parameters
 from arm_control.control.events import parse_event
 from arm_control.control.goals import GoalValidator
-from arm_control.control.plans import preset_pairs
+from arm_control.control.plan_caches import preset_pairs
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.profile import Profile
 from arm_control.model.world import ForbiddenSpace

@@ -9,7 +9,8 @@ import pytest
 
 from arm_control import config
 from arm_control.config import PlannerConfig, Rectangle
-from arm_control.control.plans import BranchRanking, PresetAnswers
+from arm_control.control.plan_caches import PresetAnswers
+from arm_control.control.plans import BranchRanking
 from arm_control.planning.planner import Planner, poses_from_waypoints
 
 

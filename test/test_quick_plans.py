@@ -19,9 +19,9 @@ import pytest
 from arm_control import config
 from arm_control.control.closed_loop import ClosedLoop
 from arm_control.control.goals import Goal
-from arm_control.control.plan_messages import Keeping, KeepPath, TimePlan
-from arm_control.control.plans import (BranchRanking, KeptTrajectories, PathPlan, PlanRequest,
-                                       PlanTimer, preset_pairs)
+from arm_control.control.plan_caches import KeptTrajectories, preset_pairs
+from arm_control.control.plan_messages import Keeping, KeepPath, PathPlan, PlanRequest, TimePlan
+from arm_control.control.plans import BranchRanking, PlanTimer
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace

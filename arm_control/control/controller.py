@@ -34,11 +34,12 @@ from arm_control.control.events import EventKind as Kind, EventLog
 from arm_control.control.goal_runner import GoalRunner
 from arm_control.control.motions import Motion, Setpoints
 from arm_control.control.pid import ArmPid
-from arm_control.control.plans import PlanRequest, PlanTimer, TimedPlan
+from arm_control.control.plan_messages import PlanRequest, TimedPlan
+from arm_control.control.plans import PlanTimer
 from arm_control.control.safety import LEAVES_UNTIL_REACHED, SafetyRules, sure_limits
 from arm_control.control.sensing import Sensing
-from arm_control.control.state_machine import (ArmState as S, COMMANDING, StateMachine,
-                                               STOPPED, Trigger as T)
+from arm_control.control.state_machine import (ArmState as S, COMMANDING, StateMachine, STOPPED,
+                                               Trigger as T)
 from arm_control.model.feedforward import PeriodFeedforward
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.text import quote

@@ -19,7 +19,8 @@ from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.events import EventKind as Kind, EventLog
 from arm_control.control.goals import Goal, GoalQueue, GoalValidator
 from arm_control.control.motions import Motion, Setpoints, StoppingMotion, StraightStop
-from arm_control.control.plans import PlanHandoff, PlanRequest, TimedPlan, Verdict
+from arm_control.control.plan_messages import PlanRequest, TimedPlan
+from arm_control.control.plans import PlanHandoff, Verdict
 from arm_control.control.state_machine import ArmState as S, StateMachine, Trigger as T
 from arm_control.text import quote
 

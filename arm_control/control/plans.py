@@ -18,7 +18,6 @@ the quick one will be a little later (``refine``), which takes over there when i
 time and ends sooner. The user waits only for the first.
 """
 
-from collections import OrderedDict
 from dataclasses import dataclass, replace
 from enum import Enum
 import math
@@ -30,6 +29,8 @@ import numpy as np
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.goals import Goal, GoalValidator
 from arm_control.control.motions import ChainedTrajectory
+from arm_control.control.plan_caches import KeptTrajectories
+from arm_control.control.plan_messages import PlanRequest, TimedPlan
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
@@ -40,71 +41,10 @@ from arm_control.timing.shaping import prove_room_cells
 
 # Branches whose quick estimate is within this fraction of the best one's are timed in full.
 BRANCH_SCREEN_MARGIN = 0.25
-# A request is one worked out ahead (``PresetAnswers``), or finds a kept trajectory
-# (``KeptTrajectories``: its path's waypoints too), when its start is within this of that
-# one's (the pose it travels as rounds the angles) and its goal within this.
-SAME_START_RAD = 1e-6
-SAME_GOAL_M = 1e-9
-# Fine trajectories from rest kept for goals that come again along the same path (besides
-# those between presets, kept for good).
-KEPT_TRAJECTORIES = 128
 # The first waypoint of a plan may differ from the requested start by rounding only ...
 PLAN_START_TOLERANCE_RAD = 0.01
 # ... and its last must put the tool on the goal.
 PLAN_GOAL_TOLERANCE_M = 0.002
-
-
-@dataclass(frozen=True)
-class PlanRequest:
-    """Plan a path from ``start_q`` to ``goal``; the motion starts at ``start_time_s`` moving
-    at ``start_velocity_rad_s`` (a preempted motion) or, when None, on acceptance at rest."""
-
-    request_id: int
-    goal: Goal
-    start_q: tuple[float, float]
-    start_velocity_rad_s: tuple[float, float]
-    start_time_s: Optional[float]
-    sent_time_s: float
-    lead_s: float = 0.1
-
-
-@dataclass(frozen=True)
-class PathPlan:
-    """A planner's answer as the timing takes it: joint waypoints, or the reason there are
-    none (the planner's own ``Plan`` has the same fields)."""
-
-    waypoints_rad: np.ndarray
-    reason: str = ''
-
-    @property
-    def ok(self) -> bool:
-        return not self.reason
-
-
-@dataclass(frozen=True)
-class TimedPlan:
-    """A request's answer: a checked, timed trajectory, or the reason there is none.
-
-    ``compute_s``: the CPU time of the timing; ``answered_s``: when the planner answered
-    (NaN: in-process, no round trip); ``received_s``: when the core got it (the node's
-    clock) -- where a goal's time goes, before the arm moves. ``handover_s`` (NaN: none):
-    this answer refines the motion taken for the same request, from this long after that
-    motion's start. ``kept``: the fine trajectory kept from an earlier goal along the same
-    path (``KeptTrajectories``), which needs no refinement.
-    """
-
-    request: PlanRequest
-    trajectory: object = None
-    reason: str = ''
-    compute_s: float = 0.0
-    answered_s: float = math.nan
-    received_s: float = math.nan
-    handover_s: float = math.nan
-    kept: bool = False
-
-    @property
-    def ok(self) -> bool:
-        return self.trajectory is not None
 
 
 class Anywhere:
@@ -114,74 +54,6 @@ class Anywhere:
     def is_free(self, q):
         free = np.ones(np.asarray(q, float).shape[:-1], dtype=bool)
         return bool(free) if free.ndim == 0 else free
-
-
-class KeptTrajectories:
-    """Fine trajectories from rest, kept for the goals that come again along the same path, as
-    6328 keeps its preset-to-preset trajectories: a robot's goals come again and again, and
-    the fine trajectory then needs no quick start and no hand-over. A request finds one for
-    its very goal whose start and path's waypoints are the kept one's to within rounding:
-    the start it is asked from is the last motion's end, which went to the planner and back
-    as a tool pose. Those between presets are ``pinned`` (kept for good); of the others the
-    ``size`` used last."""
-
-    def __init__(self, size: int = KEPT_TRAJECTORIES):
-        self.size = size
-        self._pinned = {}                   # goal (x, y) -> [(start, waypoints, trajectory)]
-        self._recent = OrderedDict()        # the same, the goal used last at the end
-
-    def __len__(self) -> int:
-        return sum(len(entries) for store in (self._pinned, self._recent)
-                   for entries in store.values())
-
-    @staticmethod
-    def keepable(request: PlanRequest, plan) -> bool:
-        """A plan from rest that has a path."""
-        return request.start_time_s is None and plan is not None and plan.ok
-
-    def find(self, request: PlanRequest, plan, touch: bool = True):
-        """The trajectory kept for ``request`` along ``plan``, or None; ``touch``: counts as
-        used."""
-        if not self.keepable(request, plan):
-            return None
-        start = np.asarray(request.start_q, float)
-        waypoints = np.asarray(plan.waypoints_rad, float)
-        goal = request.goal.xy
-        for store in (self._pinned, self._recent):
-            for kept_start, kept_waypoints, trajectory in store.get(goal, ()):
-                if (kept_waypoints.shape == waypoints.shape
-                        and np.max(np.abs(kept_start - start)) <= SAME_START_RAD
-                        and np.max(np.abs(kept_waypoints - waypoints)) <= SAME_START_RAD):
-                    if touch and store is self._recent:
-                        self._recent.move_to_end(goal)
-                    return trajectory
-        return None
-
-    def add(self, request: PlanRequest, plan, trajectory, pinned: bool = False) -> None:
-        if trajectory is None or self.find(request, plan, touch=False) is not None:
-            return
-        store = self._pinned if pinned else self._recent
-        store.setdefault(request.goal.xy, []).append(
-            (np.asarray(request.start_q, float), np.array(plan.waypoints_rad, float),
-             trajectory))
-        if pinned:
-            return
-        self._recent.move_to_end(request.goal.xy)
-        while sum(len(entries) for entries in self._recent.values()) > self.size:
-            oldest = next(iter(self._recent))
-            self._recent[oldest].pop(0)
-            if not self._recent[oldest]:
-                del self._recent[oldest]
-
-
-def preset_pairs(validator: GoalValidator) -> list:
-    """(start configuration, goal (x, y)) of every move between two presets: each free elbow
-    branch of each preset as the start, toward every other preset."""
-    presets = [(x, y) for _, x, y in validator.arm.presets]
-    return [(start_q, goal_xy)
-            for x, y in presets
-            for start_q in validator.free_configurations(x, y)
-            for goal_xy in presets if goal_xy != (x, y)]
 
 
 class PlanTimer:
@@ -340,41 +212,6 @@ class BranchRanking:
             return plans[close[0]]
         duration, index = min((self.duration_s(plans[k].waypoints_rad), k) for k in close)
         return plans[index] if math.isfinite(duration) else None
-
-
-class PresetAnswers:
-    """The planner node's answers between presets, worked out before they are asked for, as
-    6328 keeps its preset-to-preset trajectories: a robot goes from preset to preset, and its
-    arm rests on the very configuration the last answer ended on, so the next goal from there
-    finds its answer ready instead of searching (tens of ms on a robot's world).
-
-    ``pending`` lists what is left to work out (each preset branch as a start, toward every
-    other preset), ``prepare_next`` works out one; ``plan`` answers any request, from the
-    store when its start and goal are one of these."""
-
-    def __init__(self, ranking: BranchRanking, planner):
-        self.ranking, self.planner = ranking, planner
-        self.pending = preset_pairs(ranking.validator)
-        self._answers = []                     # (start_q, goal_xy, plan)
-
-    @property
-    def ready(self) -> int:
-        return len(self._answers)
-
-    def prepare_next(self) -> None:
-        start_q, goal_xy = self.pending.pop(0)
-        plan = self.ranking.plan(self.planner, start_q, goal_xy)
-        self._answers.append((np.asarray(start_q, float), goal_xy, plan))
-
-    def plan(self, start_q, goal_xy):
-        """The answer ``BranchRanking.plan`` gives, from the store when it holds it."""
-        start_q = np.asarray(start_q, float)
-        for start, goal, plan in self._answers:
-            apart = np.angle(np.exp(1j * (start - start_q)))     # a pose's angles may wrap
-            if (np.max(np.abs(apart)) <= SAME_START_RAD
-                    and math.dist(goal, goal_xy) <= SAME_GOAL_M):
-                return plan
-        return self.ranking.plan(self.planner, start_q, goal_xy)
 
 
 class PlanHandoff:

@@ -17,7 +17,8 @@ import time
 from nav_msgs.srv import GetPlan
 
 from arm_control.control.goals import Goal, GoalValidator
-from arm_control.control.plans import PathPlan, PlanRequest, preset_pairs, TimedPlan
+from arm_control.control.plan_caches import preset_pairs
+from arm_control.control.plan_messages import PathPlan, PlanRequest, TimedPlan
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes import messages

@@ -40,9 +40,9 @@ import numpy as np
 
 from arm_control.control.goals import Goal
 from arm_control.control.plan_messages import (Done, KeeperJob, KeeperResult, KeeperSettings,
-                                               Keeping, KeepPath, Kept, Ready, Settings,
-                                               TimePlan)
-from arm_control.control.plans import PathPlan, PlanRequest, PlanTimer, TimedPlan
+                                               Keeping, KeepPath, Kept, PathPlan, PlanRequest,
+                                               Ready, Settings, TimedPlan, TimePlan)
+from arm_control.control.plans import PlanTimer
 from arm_control.realtime import raised
 from arm_control.timing.bus import compile_kernels
 from arm_control.timing.moving_start import toppra_solver

@@ -39,7 +39,8 @@ from rclpy.node import Node
 from arm_control import realtime
 from arm_control.config import ArmConfig, FRAME_ID, PlannerConfig
 from arm_control.control.goals import PLANE_TOLERANCE_M
-from arm_control.control.plans import BranchRanking, PresetAnswers
+from arm_control.control.plan_caches import PresetAnswers
+from arm_control.control.plans import BranchRanking
 from arm_control.nodes import messages
 from arm_control.nodes.common import declare_parameters, LATCHED, run, status
 from arm_control.planning.planner import Planner, poses_from_waypoints
