@@ -36,6 +36,7 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
+from arm_control.control.commanders import CLAIM_STALE_S
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health, loop_values, trust_values
@@ -47,6 +48,7 @@ from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.control.trust import GraphCounts, TrustWatch
 from arm_control.nodes import messages, realtime
+from arm_control.nodes.claim_link import ClaimLink
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
                                       LATCHED, log_at, loop_statistics, PLANNER_AVAILABLE,
                                       run, STATE_STREAM, status)
@@ -87,6 +89,7 @@ class ControllerNode(Node):
         self.core = ArmController(self.arm, self.config)
         self.trajectories = TrajectoryServer(self, params)     # FollowJointTrajectory, topic
         self.trust, self.gate = TrustWatch(self.core), InputGate()
+        self.claims, self.disabled_to_yield = ClaimLink(self), False   # who keeps the arm
         # The latest reading for the loop, and the encoders and bus: (value, received at).
         self.readings, self.encoders, self.bus = [], None, None
         self.bad_inputs = self.bad_inputs_said = 0
@@ -160,7 +163,8 @@ class ControllerNode(Node):
         with self.lock:
             powered = not self.core.unpowered
             result = call(self.core_now_s(), *args)
-            if powered and self.core.unpowered and not self.loop.simulated():
+            if powered and self.core.unpowered and not self.loop.simulated() \
+                    and not self.claims.yielding:
                 self.last_command = (0.0, 0.0)
                 self.voltage_pub.publish(Float64MultiArray(data=[0.0, 0.0]))
         self.publish_outputs()
@@ -237,6 +241,10 @@ class ControllerNode(Node):
         long to be a name is refused before anything formats it."""
         if not self.gate.admit(topic, time.monotonic()):
             return True
+        if self.claims.yielding:
+            self.command(self.core.goals.reject, f'{whose} rejected: another controller '
+                         'has the arm (this one yielded)', 'yielded')
+            return True
         problem = messages.name_problem(text, what)
         if problem:
             self.command(self.core.goals.reject, f'{whose} rejected: {problem}', 'oversized')
@@ -244,6 +252,10 @@ class ControllerNode(Node):
 
     @guarded
     def on_service(self, response, call, *args):
+        if self.claims.yielding:
+            response.success, response.message = False, 'another controller has the arm: ' \
+                'this one yielded and commands nothing'
+            return response
         response.success, response.message = self.command(call, *args)
         return response
 
@@ -306,8 +318,13 @@ class ControllerNode(Node):
         readings, self.readings = self.readings, []
         for reading, _ in readings:
             self.commander.clock.observe(reading.sampled_s)
+        if readings:
+            self.claims.ready()
+        yields = self.claims.yields()
         acts_s = self.acts_s(now)
         with self.lock:
+            if yields != self.claims.yielding:
+                self.change_standing(acts_s, yields)
             try:
                 voltage = self.core.step(acts_s, *(readings[-1] if readings else (None, None)),
                                          earlier=readings[:-1])
@@ -320,10 +337,11 @@ class ControllerNode(Node):
             said = (self.core.events.waiting or self.core.goals.plans.waiting
                     or self.core.state != self.last_state
                     or self.core.goals.queue.version != self.last_queue_version)
-            if estimate is not None:     # before the first reading there is nothing to command
+            commanding = estimate is not None and not yields    # nothing before a reading
+            if commanding:
                 self.last_command = self.commander.command(self.core, voltage, acts_s)
                 self.voltage_pub.publish(messages.voltage_command(self.last_command))
-        if estimate is not None:
+        if commanding:
             self.command_delay.sent(time.perf_counter() - began)
             stamp = Time(nanoseconds=round(acts_s * 1e9)).to_msg()     # what they are for
             self.setpoint_pub.publish(messages.joint_state(stamp, setpoint[0], setpoint[1]))
@@ -334,6 +352,30 @@ class ControllerNode(Node):
             self.loop_periods_s.append(now - self.last_tick_s)
         self.last_tick_s = now
         self.loop_compute_s.append(time.perf_counter() - began)
+
+    def change_standing(self, now_s: float, yields: bool) -> None:
+        """Under the lock: yield the arm to an earlier claim (the core disabled, where it can
+        be, so that it neither moves nor judges an arm it does not command; nothing sent), or
+        take it back where it is once every earlier claim has gone (``commanders.py``)."""
+        self.claims.yielding = yields
+        mine, owner = self.claims.commanders.mine, self.claims.owner()
+        if yields:
+            self.disabled_to_yield = self.core.state != ArmState.DISABLED and \
+                self.core.enable(now_s, False)[0] and self.core.state == ArmState.DISABLED
+            self.last_command = self.commander.last_profile = None   # on exit: nothing
+            self.core.events.say(now_s, Kind.YIELDED, 'error', (
+                f'another controller ({owner.token}) has had the arm since '
+                f'{owner.since_s:.3f}, before this one ({mine.token if mine else "not ready"}): '
+                'this one sends nothing and answers that it does not command, until it goes'),
+                'voltage_command')
+            return
+        what = 'it was not disabled to yield: as it is'
+        if self.disabled_to_yield and self.core.state == ArmState.DISABLED:
+            what = self.core.enable(now_s, True)[1]
+        self.disabled_to_yield = False
+        self.core.events.say(now_s, Kind.TAKEN_OVER, 'warning', 'the controller that had the '
+                             f'arm is gone (no claim heard for {CLAIM_STALE_S:g} s): {what}',
+                             'voltage_command')
 
     def on_timed_plan(self, timed) -> None:
         """From the worker's result thread: the plan to the core, from when the next command
@@ -354,7 +396,7 @@ class ControllerNode(Node):
         for event in events:
             self.events_pub.publish(String(data=str(event)))
             log_at(self.get_logger(), event.level, str(event))
-        if state != self.last_state:
+        if state != self.last_state and not self.claims.yielding:
             self.last_state = state
             self.state_pub.publish(String(data=str(state)))
         if version != self.last_queue_version:
@@ -399,9 +441,12 @@ class ControllerNode(Node):
         self.loop.stop()
         with self.lock:
             last = self.last_command
-            if not self.commander.profiles:
+            if self.claims.yielding:
+                last = None                         # another controller has the arm
+            elif not self.commander.profiles:
                 last = (0.0, 0.0)
-            elif last is not None and self.core.unpowered:
+            elif last is not None and self.core.unpowered \
+                    and self.core.state != ArmState.NO_SENSORS:     # lost: its profile holds
                 last = (0.0, 0.0)
         if last is None:           # a profile controller that never commanded: leave the arm
             self.plans.close()
