@@ -5,7 +5,9 @@ and current, for the estimate and the feedforward), ``goal_point`` (PointStamped
 ``goal_preset`` (String: replaces the queue and the motion, as a driver's button) and
 ``driver_velocity`` (TwistStamped: tool velocity in arm_base). Publishes ``voltage_command``
 every period, ``arm_state`` (latched), ``~/setpoint``, ``~/estimate``, ``~/goal_queue``
-(latched), ``~/events`` ("kind (cause): sentence") and ``/diagnostics``. Client of
+(latched), ``~/events`` ("kind (cause): sentence"), ``/diagnostics`` and
+``voltage_command_claim`` (its claim to the arm: of two controllers the first keeps it, the
+other yields and sends nothing: ``claim_link``). Client of
 ``plan_path``; serves ``~/estop``, ``~/reset``, ``~/cancel`` (Trigger), ``~/enable``
 (SetBool). Gains, reserves, tolerances, dwell and presets change at run time (``TUNABLE``).
 
@@ -36,7 +38,6 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
-from arm_control.control.commanders import CLAIM_STALE_S
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.health import diagnostics, health, loop_values, trust_values
@@ -89,7 +90,7 @@ class ControllerNode(Node):
         self.core = ArmController(self.arm, self.config)
         self.trajectories = TrajectoryServer(self, params)     # FollowJointTrajectory, topic
         self.trust, self.gate = TrustWatch(self.core), InputGate()
-        self.claims, self.disabled_to_yield = ClaimLink(self), False   # who keeps the arm
+        self.claims = ClaimLink(self)                       # who keeps the arm
         # The latest reading for the loop, and the encoders and bus: (value, received at).
         self.readings, self.encoders, self.bus = [], None, None
         self.bad_inputs = self.bad_inputs_said = 0
@@ -324,7 +325,7 @@ class ControllerNode(Node):
         acts_s = self.acts_s(now)
         with self.lock:
             if yields != self.claims.yielding:
-                self.change_standing(acts_s, yields)
+                self.claims.change(self, acts_s, yields)
             try:
                 voltage = self.core.step(acts_s, *(readings[-1] if readings else (None, None)),
                                          earlier=readings[:-1])
@@ -352,30 +353,6 @@ class ControllerNode(Node):
             self.loop_periods_s.append(now - self.last_tick_s)
         self.last_tick_s = now
         self.loop_compute_s.append(time.perf_counter() - began)
-
-    def change_standing(self, now_s: float, yields: bool) -> None:
-        """Under the lock: yield the arm to an earlier claim (the core disabled, where it can
-        be, so that it neither moves nor judges an arm it does not command; nothing sent), or
-        take it back where it is once every earlier claim has gone (``commanders.py``)."""
-        self.claims.yielding = yields
-        mine, owner = self.claims.commanders.mine, self.claims.owner()
-        if yields:
-            self.disabled_to_yield = self.core.state != ArmState.DISABLED and \
-                self.core.enable(now_s, False)[0] and self.core.state == ArmState.DISABLED
-            self.last_command = self.commander.last_profile = None   # on exit: nothing
-            self.core.events.say(now_s, Kind.YIELDED, 'error', (
-                f'another controller ({owner.token}) has had the arm since '
-                f'{owner.since_s:.3f}, before this one ({mine.token if mine else "not ready"}): '
-                'this one sends nothing and answers that it does not command, until it goes'),
-                'voltage_command')
-            return
-        what = 'it was not disabled to yield: as it is'
-        if self.disabled_to_yield and self.core.state == ArmState.DISABLED:
-            what = self.core.enable(now_s, True)[1]
-        self.disabled_to_yield = False
-        self.core.events.say(now_s, Kind.TAKEN_OVER, 'warning', 'the controller that had the '
-                             f'arm is gone (no claim heard for {CLAIM_STALE_S:g} s): {what}',
-                             'voltage_command')
 
     def on_timed_plan(self, timed) -> None:
         """From the worker's result thread: the plan to the core, from when the next command
