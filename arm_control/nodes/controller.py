@@ -162,8 +162,10 @@ class ControllerNode(Node):
         tick's own command, so none computed before the call goes out after it. (Not in
         simulated time, where the sim takes one command per step: the next tick's.)"""
         with self.lock:
+            began = time.perf_counter()
             powered = not self.core.unpowered
             result = call(self.core_now_s(), *args)
+            self.gate.spent(time.perf_counter() - began)     # inputs' share of the core
             if powered and self.core.unpowered and not self.loop.simulated() \
                     and not self.claims.yielding:
                 self.last_command = (0.0, 0.0)
@@ -405,7 +407,8 @@ class ControllerNode(Node):
         values.update(loop_values(stats, ages, self.loop))
         values.update({'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner),
                        'trajectories kept': self.plans.worker.kept,
-                       **{f'{kind} dropped': n for kind, n in self.gate.dropped.items()}})
+                       **{f'{kind} dropped': n for kind, n in self.gate.dropped.items()},
+                       'inputs dropped beyond the work share': self.gate.busy})
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()
         diagnostic.status = [status(self, LEVELS[level], message, values)]
