@@ -300,7 +300,7 @@ def incidents(heard: Listener, start_s: float, end_s: float) -> list:
         more = ', ...' if len(set(estops)) > 1 else ''
         out.append(f'{len(estops)} e-stops ({short(estops[0], 30)}{more})')
     if lost:
-        out.append(f'joint states lost {lost} times (0 V)')
+        out.append(f'joint states lost {lost} times (the last profile held)')
     return out
 
 

@@ -42,7 +42,7 @@ def said_of(b: Bench, since_s: float) -> str:
     counts = {}
     for t, kind, _, text in b.heard.events:
         if t >= since_s and kind in ('untrusted', 'trusted', 'sensors_disagree', 'arm_moved',
-                                     'clock_jumped', 'sensors_lost'):
+                                     'clock_jumped', 'sensors_lost', 'yielded', 'taken_over'):
             key = f'{kind} ({parse_event(text)[1]})' if parse_event(text)[1] else kind
             counts[key] = counts.get(key, 0) + 1
     return ', '.join(f'{n} {k}' for k, n in counts.items()) or 'no trust events'

@@ -191,3 +191,25 @@ def test_beside_a_second_publisher_a_reading_away_from_the_prediction_is_refused
                 sensing.update(t_stray, stray, t_stray, (0.0, 0.0))
     assert sensing.refused == 5
     assert np.max(np.abs(sensing.state[:2] - upright)) < 0.1 * DEG
+
+
+def test_beside_a_second_publisher_its_reading_first_after_a_stall_is_refused(
+        arm, controller_config):
+    """The robot's readings stop for 0.22 s (more than the trusted source may be quiet), and
+    the second publisher's comes first when they resume: refused (the robot held the arm
+    meanwhile, near the last reading taken), and the robot's taken again. Taken whatever its
+    source, it was re-held and the robot's refused from it: the arm followed the other."""
+    sensing = Sensing(arm, controller_config.process_noise_rad_s2)
+    sensing.refuse_leaps = True
+    upright = (math.pi / 2, 0.0)
+    true = SensorReading(upright, (0.0, 0.0))
+    stray = SensorReading((upright[0] + ROGUE_OFFSET_RAD, upright[1]), (0.0, 0.0))
+    for k in range(25):
+        sensing.update(0.02 * k, true, 0.02 * k, (0.0, 0.0))
+    resumed_s = 0.48 + 0.22
+    for k in range(10):
+        t = resumed_s + 0.02 * k
+        sensing.update(t, stray, t, (0.0, 0.0))
+        sensing.update(t + 0.01, true, t + 0.01, (0.0, 0.0))
+    assert sensing.refused == 10 and sensing.refusal[0] == 'publishers'
+    assert np.max(np.abs(sensing.state[:2] - upright)) < 0.1 * DEG

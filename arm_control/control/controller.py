@@ -10,7 +10,8 @@ Each period the node (or a test, or a benchmark) calls ``step(now_s, reading)``;
    voltage that keeps a model of the arm on the trajectory (``PeriodFeedforward``), the PID
    tracks that model's state on the estimate; a planned motion the arm is late on waits for
    it (``_wait_for_a_late_arm``);
-4. enforces the safety rules (``safety.py``): control that has failed stops at 0 V; an
+4. enforces the safety rules (``safety.py``): control that has failed stops at 0 V (its
+   sensors lost, the robot plays the rest of its last profile: ``robot_command``); an
    e-stop by service brakes to rest along the path and holds there (``estop_holds_arm``:
    with no brake, 0 V drops a 45 kg arm); taking control back after 0 V brakes an arm that
    moves, returns it to where it was held, or lifts it clear of forbidden space.
@@ -342,8 +343,10 @@ class ArmController:
             self.machine.fire(T.SENSORS_LOST)
             self.goals.last_error = (f'no joint states for {age_s:.3f} s (limit '
                                      f'{self.config.joint_state_timeout_s:g} s)')
+            action = ('the robot plays the rest of the last profile (to rest, held)'
+                      if self.config.command_mode == 'profile' else 'sending 0 V')
             self._say(now_s, Kind.SENSORS_LOST, 'error',
-                      f'{self.goals.last_error}: sending 0 V until they return')
+                      f'{self.goals.last_error}: {action} until they return')
         if not fresh and self.estop_holding:
             self.estop(now_s, f'no joint states for {age_s:.3f} s while holding', cut_power=True)
         if fresh and self.state == S.NO_SENSORS:

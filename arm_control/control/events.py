@@ -45,6 +45,8 @@ class EventKind(str, Enum):
     UNTRUSTED = 'untrusted'                    # an input it cannot trust (cause: which)
     TRUSTED = 'trusted'                        # ... trusted again
     SENSORS_DISAGREE = 'sensors_disagree'      # a reading refused: the others say otherwise
+    YIELDED = 'yielded'                        # another controller has the arm: sends nothing
+    TAKEN_OVER = 'taken_over'                  # ... it went: this one takes the arm as it is
 
     def __str__(self) -> str:
         return self.value

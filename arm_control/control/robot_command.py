@@ -22,6 +22,12 @@ robot's instants (``TICK_AFTER_INSTANT_S``), and sends a profile
   it is; the later ones', the inverse dynamics' at each period's middle;
 - then a stop to rest along the path the arm is on (``Setpoints.stopping``), ending at rest
   with its holding volts: played to its end with nothing newer, a profile leaves the arm held.
+
+Its sensors lost (``no_sensors``), the controller cannot compute a newer profile, and 0 V
+would drop the arm: it sends what is left of its last one (``rest_of``) each period, which
+the robot plays as it would have (the stop, then the hold on its own readings). A plain 0 V
+pair stays the command when the power is cut on purpose (e-stop, disable) or nothing was
+sent before.
 """
 
 from collections import deque
@@ -30,6 +36,7 @@ import statistics
 
 import numpy as np
 
+from arm_control.control.state_machine import ArmState
 from arm_control.model.profile import Profile, Setpoint
 
 AHEAD = 3                     # setpoints along the motion before the stop
@@ -103,6 +110,7 @@ class Commander:
         self.period_s = config.period_s
         self.clock = RobotClock(config.period_s)
         self.profiles = config.command_mode == 'profile'
+        self.last_profile = None        # the last profile sent while the robot plays one
 
     def tick_due(self, due_s: float) -> float:
         """The controller's next tick, due at ``due_s``, moved to the nearest time
@@ -120,10 +128,32 @@ class Commander:
         return self.clock.acting_at(arrives_s) if self.profiles else arrives_s
 
     def command(self, core, voltage, acts_s: float):
-        """The core's last step as a Profile from ``acts_s``, or its voltage pair."""
+        """The core's last step as a Profile from ``acts_s``; its sensors lost, what is left
+        of the last profile (the robot holds); else its voltage pair."""
         if self.profiles and not core.unpowered:
-            return profile_ahead(core, acts_s, self.clock.period_s)
+            self.last_profile = profile_ahead(core, acts_s, self.clock.period_s)
+            return self.last_profile
+        if self.profiles and core.state == ArmState.NO_SENSORS and self.last_profile is not None:
+            self.last_profile = rest_of(self.last_profile, acts_s)
+            return self.last_profile
+        self.last_profile = None                    # a pair in charge: nothing left to hold
         return tuple(float(v) for v in voltage)
+
+
+def rest_of(profile: Profile, from_s: float) -> Profile:
+    """What is left of ``profile`` from the robot's instant ``from_s``: its setpoints from
+    the one in force there (``Profile.at``), or, once it is over, its last, held at rest.
+    The robot plays it exactly as it would have played ``profile``, and it is not late for
+    its first instant."""
+    k = math.floor((from_s - profile.start_s) / profile.step_s + 0.5)
+    if k <= 0:
+        return profile
+    if k < len(profile.setpoints):
+        return Profile(profile.start_s + k * profile.step_s, profile.step_s, profile.gains,
+                       profile.setpoints[k:])
+    last = profile.setpoints[-1]
+    return Profile(float(from_s), profile.step_s, profile.gains,
+                   (Setpoint(last.position_rad, (0.0, 0.0), last.feedforward_v),))
 
 
 def profile_ahead(core, start_s: float, step_s: float) -> Profile:

@@ -171,9 +171,24 @@ class Sensing:
         While another node publishes, a reading is a leap when it lies farther than
         ``LEAP_MARGIN_RAD`` from the filter's prediction at its instant, however long since
         the last reading: the free-speed bound of ``_leapt`` grows with the interval (20 deg
-        in under 30 ms), so a second publisher's reading after a missed one passed it."""
+        in under 30 ms), so a second publisher's reading after a missed one passed it.
+        Once the source it trusted has gone quiet for ``TRUSTED_SOURCE_S``, a reading is
+        taken if it is within ``LEAP_MARGIN_RAD`` of the last one taken, or nobody else
+        publishes."""
         if taken_s - self.last_reading_s > TRUSTED_SOURCE_S:
-            return False                    # the source it trusted went quiet: take this
+            # The source it trusted went quiet: take this, unless another node publishes and
+            # it lies beyond the margin from the last reading taken (the robot held the arm
+            # meanwhile: its last profile ends held). Taken whatever its source, the other's
+            # first reading after a stall was re-held, and the robot's refused from it.
+            away = pot - self.last_potentiometer
+            if not self.refuse_leaps or np.max(np.abs(away)) <= LEAP_MARGIN_RAD:
+                return False
+            self.refusal = ('publishers', f'the potentiometers leapt ({math.degrees(away[0]):+.1f}'
+                            f', {math.degrees(away[1]):+.1f}) deg from the last reading taken, '
+                            f'{taken_s - self.last_reading_s:.2f} s before, while another node '
+                            'publishes joint_states')
+            self.refused += 1
+            return True
         self.estimator.restore(self.kept)
         self._predict(self.kept_s, max(taken_s, self.kept_s))
         estimate = self.estimator.state[:2]

@@ -46,7 +46,9 @@ class GraphCounts:
                 ('/clock', self.clock, 'time may jump; each jump is taken out of control '
                  'time'),
                 ('voltage_command', self.voltage_command, 'another node commands the motors: '
-                 'stop it (this controller cannot)'),
+                 'of two controllers the one that took the arm first keeps it, the other '
+                 'yields (voltage_command_claim); one that claims nothing cannot be stopped '
+                 'from here'),
                 ('node name', self.same_name, 'its parameters, services and states may be '
                  'answered by another node')):
             if count > 1:

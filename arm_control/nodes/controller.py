@@ -5,7 +5,9 @@ and current, for the estimate and the feedforward), ``goal_point`` (PointStamped
 ``goal_preset`` (String: replaces the queue and the motion, as a driver's button) and
 ``driver_velocity`` (TwistStamped: tool velocity in arm_base). Publishes ``voltage_command``
 every period, ``arm_state`` (latched), ``~/setpoint``, ``~/estimate``, ``~/goal_queue``
-(latched), ``~/events`` ("kind (cause): sentence") and ``/diagnostics``. Client of
+(latched), ``~/events`` ("kind (cause): sentence"), ``/diagnostics`` and
+``voltage_command_claim`` (its claim to the arm: of two controllers the first keeps it, the
+other yields and sends nothing: ``claim_link``). Client of
 ``plan_path``; serves ``~/estop``, ``~/reset``, ``~/cancel`` (Trigger), ``~/enable``
 (SetBool). Gains, reserves, tolerances, dwell and presets change at run time (``TUNABLE``).
 
@@ -48,6 +50,7 @@ from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.control.trust import GraphCounts, TrustWatch
 from arm_control.nodes import messages
+from arm_control.nodes.claim_link import ClaimLink
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
                                       LATCHED, log_at, loop_statistics, PLANNER_AVAILABLE,
                                       run, STATE_STREAM, status)
@@ -88,6 +91,7 @@ class ControllerNode(Node):
         self.core = ArmController(self.arm, self.config)
         self.trajectories = TrajectoryServer(self, params)     # FollowJointTrajectory, topic
         self.trust, self.gate = TrustWatch(self.core), InputGate()
+        self.claims = ClaimLink(self)                       # who keeps the arm
         # The latest reading for the loop, and the encoders and bus: (value, received at).
         self.readings, self.encoders, self.bus = [], None, None
         self.bad_inputs = self.bad_inputs_said = 0
@@ -159,9 +163,12 @@ class ControllerNode(Node):
         tick's own command, so none computed before the call goes out after it. (Not in
         simulated time, where the sim takes one command per step: the next tick's.)"""
         with self.lock:
+            began = time.perf_counter()
             powered = not self.core.unpowered
             result = call(self.core_now_s(), *args)
-            if powered and self.core.unpowered and not self.loop.simulated():
+            self.gate.spent(time.perf_counter() - began)     # inputs' share of the core
+            if powered and self.core.unpowered and not self.loop.simulated() \
+                    and not self.claims.yielding:
                 self.last_command = (0.0, 0.0)
                 self.voltage_pub.publish(Float64MultiArray(data=[0.0, 0.0]))
         self.publish_outputs()
@@ -238,6 +245,10 @@ class ControllerNode(Node):
         long to be a name is refused before anything formats it."""
         if not self.gate.admit(topic, time.monotonic()):
             return True
+        if self.claims.yielding:
+            self.command(self.core.goals.reject, f'{whose} rejected: another controller '
+                         'has the arm (this one yielded)', 'yielded')
+            return True
         problem = messages.name_problem(text, what)
         if problem:
             self.command(self.core.goals.reject, f'{whose} rejected: {problem}', 'oversized')
@@ -245,6 +256,10 @@ class ControllerNode(Node):
 
     @guarded
     def on_service(self, response, call, *args):
+        if self.claims.yielding:
+            response.success, response.message = False, 'another controller has the arm: ' \
+                'this one yielded and commands nothing'
+            return response
         response.success, response.message = self.command(call, *args)
         return response
 
@@ -307,8 +322,13 @@ class ControllerNode(Node):
         readings, self.readings = self.readings, []
         for reading, _ in readings:
             self.commander.clock.observe(reading.sampled_s)
+        if readings:
+            self.claims.ready()
+        yields = self.claims.yields()
         acts_s = self.acts_s(now)
         with self.lock:
+            if yields != self.claims.yielding:
+                self.claims.change(self, acts_s, yields)
             try:
                 voltage = self.core.step(acts_s, *(readings[-1] if readings else (None, None)),
                                          earlier=readings[:-1])
@@ -321,10 +341,11 @@ class ControllerNode(Node):
             said = (self.core.events.waiting or self.core.goals.plans.waiting
                     or self.core.state != self.last_state
                     or self.core.goals.queue.version != self.last_queue_version)
-            if estimate is not None:     # before the first reading there is nothing to command
+            commanding = estimate is not None and not yields    # nothing before a reading
+            if commanding:
                 self.last_command = self.commander.command(self.core, voltage, acts_s)
                 self.voltage_pub.publish(messages.voltage_command(self.last_command))
-        if estimate is not None:
+        if commanding:
             self.command_delay.sent(time.perf_counter() - began)
             stamp = Time(nanoseconds=round(acts_s * 1e9)).to_msg()     # what they are for
             self.setpoint_pub.publish(messages.joint_state(stamp, setpoint[0], setpoint[1]))
@@ -355,7 +376,7 @@ class ControllerNode(Node):
         for event in events:
             self.events_pub.publish(String(data=str(event)))
             log_at(self.get_logger(), event.level, str(event))
-        if state != self.last_state:
+        if state != self.last_state and not self.claims.yielding:
             self.last_state = state
             self.state_pub.publish(String(data=str(state)))
         if version != self.last_queue_version:
@@ -387,7 +408,8 @@ class ControllerNode(Node):
         values.update(loop_values(stats, ages, self.loop))
         values.update({'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner),
                        'trajectories kept': self.plans.worker.kept,
-                       **{f'{kind} dropped': n for kind, n in self.gate.dropped.items()}})
+                       **{f'{kind} dropped': n for kind, n in self.gate.dropped.items()},
+                       'inputs dropped beyond the work share': self.gate.busy})
         diagnostic = DiagnosticArray()
         diagnostic.header.stamp = self.get_clock().now().to_msg()
         diagnostic.status = [status(self, LEVELS[level], message, values)]
@@ -400,9 +422,12 @@ class ControllerNode(Node):
         self.loop.stop()
         with self.lock:
             last = self.last_command
-            if not self.commander.profiles:
+            if self.claims.yielding:
+                last = None                         # another controller has the arm
+            elif not self.commander.profiles:
                 last = (0.0, 0.0)
-            elif last is not None and self.core.unpowered:
+            elif last is not None and self.core.unpowered \
+                    and self.core.state != ArmState.NO_SENSORS:     # lost: its profile holds
                 last = (0.0, 0.0)
         if last is None:           # a profile controller that never commanded: leave the arm
             self.plans.close()
