@@ -41,7 +41,6 @@ MODULE_KEYS = {
     'yaml': 'python3-yaml',
     'matplotlib': 'python3-matplotlib',
     'tkinter': 'python3-tk',                  # in the standard library, but Debian splits it
-    'filterpy': 'python3-filterpy-pip',
     'toppra': 'python3-toppra-pip',
     'mcap': 'mcap-ros2-support',              # pip's mcap-ros2-support brings mcap with it
     'mcap_ros2': 'mcap-ros2-support',
