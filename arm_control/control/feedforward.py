@@ -17,8 +17,10 @@ Holding still, nothing changes from one period to the next: the setpoint rests a
 over the periods ahead, the reference sits on it, and the voltage that held it there holds it
 again. Once a period has shown that (the reference, driven by the last voltage, ended within
 ``HOLD_TOLERANCE`` of the setpoint at rest and the new voltage equals the last), the voltage
-is kept and the reference put on the setpoint, until the setpoint, the battery or the limit
-changes: the same answer, without solving it again every period.
+is kept and the reference put on the setpoint, until the setpoint moves or the battery (or
+the limit) changes by ``BATTERY_TOLERANCE_V``: the same answer, without solving it again
+every period. (At rest the answer does not depend on the battery at all unless a voltage is
+clipped to it, and the kept ones are below the limit by more than that.)
 """
 
 import math
@@ -31,6 +33,9 @@ from arm_control.model.electrical import PowerSupply
 # A reference this close to a setpoint at rest (rad, rad/s), driven by a voltage this close
 # to the last (V), is held by it: the next periods would solve the same problem again.
 HOLD_TOLERANCE = 1e-9
+# ... until the battery's voltage, or the limit, has moved this far from the one it was
+# solved at (V): a reading of it rounds to float32 and swings with every command.
+BATTERY_TOLERANCE_V = 0.01
 
 
 class PeriodFeedforward:
@@ -89,7 +94,7 @@ class PeriodFeedforward:
         here = np.concatenate([q_sp, qd_sp])
         samples = [setpoint(now_s + fraction * period) for fraction in (0, 0.5, 1, 1.5, 2)]
         rest = _at_rest(samples, limit, self.supply.nominal_voltage)
-        if rest is not None and rest == self.holding and self.state is not None:
+        if self.state is not None and _same_rest(rest, self.holding):
             self.state, self.time_s = here, now_s
             return self.voltage.copy()
         driven = self.state is not None and 0.0 < now_s - self.time_s <= 2.5 * period
@@ -123,9 +128,10 @@ class PeriodFeedforward:
         last = self.voltage
         self.voltage = np.clip(guess[:2], -limit, limit)
         self.next_voltage = np.clip(guess[2:], -limit, limit)     # the period after
-        self.holding = rest if held and np.max(np.abs(guess)) < limit and np.max(
-            np.abs(np.concatenate([last, self.next_voltage]) - np.tile(self.voltage, 2))
-        ) <= HOLD_TOLERANCE else None
+        steady = np.max(np.abs(np.concatenate([last, self.next_voltage])
+                               - np.tile(self.voltage, 2))) <= HOLD_TOLERANCE
+        within = np.max(np.abs(guess)) < limit - BATTERY_TOLERANCE_V
+        self.holding = rest if held and steady and within else None
         return self.voltage.copy()
 
 
@@ -136,3 +142,9 @@ def _at_rest(samples, limit: float, bus: float):
         if np.any(q_k != q) or np.any(qd_k) or np.any(qdd_k):
             return None
     return float(q[0]), float(q[1]), limit, bus
+
+
+def _same_rest(rest, holding) -> bool:
+    """The same angle, the limit and the battery within ``BATTERY_TOLERANCE_V``."""
+    return rest is not None and holding is not None and rest[:2] == holding[:2] and all(
+        abs(a - b) <= BATTERY_TOLERANCE_V for a, b in zip(rest[2:], holding[2:]))

@@ -14,6 +14,7 @@ from typing import Optional
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -158,6 +159,15 @@ def guarded(callback):
                 response.success, response.message = False, f'failed: {error!r}'
             return response
     return wrapper
+
+
+def output(node, kind, topic: str, qos):
+    """A publisher with no QoS event handlers: each handler is one more entity the executor
+    gathers on every wake, hundreds a second in the controller; a subscriber whose QoS does
+    not match says so itself."""
+    return node.create_publisher(kind, topic, qos,
+                                 event_callbacks=PublisherEventCallbacks(
+                                     use_default_callbacks=False))
 
 
 def log_at(logger, level: str, text: str) -> None:

@@ -48,14 +48,15 @@ from arm_control.control.state_machine import ArmState
 from arm_control.control.trust import GraphCounts, TrustWatch
 from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
-                                      LATCHED, log_at, loop_statistics, PLANNER_AVAILABLE,
-                                      run, STATE_STREAM, status)
+                                      LATCHED, log_at, loop_statistics, output,
+                                      PLANNER_AVAILABLE, run, STATE_STREAM, status)
 from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.plan_link import PlanLink
 from arm_control.nodes.trajectory_server import TrajectoryServer
 from arm_control.parameters import ParameterError
 
-PLANNER_POLL_S = 0.05             # how often to look whether the planner is there
+PLANNER_POLL_S = 0.05             # how often to look whether the planner is there ...
+PLANNER_SETTLED_POLL_S = 0.5      # ... once it is, with nothing asked of it and no goal
 GRAPH_WATCH_S = 0.5               # how often to count who else publishes its topics
 # The executor's thread (messages, services) at SCHED_FIFO this low when the loop is at real
 # time: above every normal process, below the loop. At normal priority a busy machine can
@@ -98,13 +99,13 @@ class ControllerNode(Node):
         self.last_command = None                    # the last sent: a pair or a Profile
         sys.setswitchinterval(0.001)   # another thread waits 1 ms for Python, not 5
 
-        self.voltage_pub = self.create_publisher(Float64MultiArray, 'voltage_command', COMMANDS)
-        self.setpoint_pub = self.create_publisher(JointState, '~/setpoint', STATE_STREAM)
-        self.estimate_pub = self.create_publisher(JointState, '~/estimate', STATE_STREAM)
-        self.state_pub = self.create_publisher(String, 'arm_state', LATCHED)
-        self.queue_pub = self.create_publisher(Path, '~/goal_queue', LATCHED)
-        self.events_pub = self.create_publisher(String, '~/events', EVENTS)
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.voltage_pub = output(self, Float64MultiArray, 'voltage_command', COMMANDS)
+        self.setpoint_pub = output(self, JointState, '~/setpoint', STATE_STREAM)
+        self.estimate_pub = output(self, JointState, '~/estimate', STATE_STREAM)
+        self.state_pub = output(self, String, 'arm_state', LATCHED)
+        self.queue_pub = output(self, Path, '~/goal_queue', LATCHED)
+        self.events_pub = output(self, String, '~/events', EVENTS)
+        self.diagnostics_pub = output(self, DiagnosticArray, '/diagnostics', 10)
         for topic, kind, handler, qos in (
                 ('joint_states', JointState, self.on_joint_states, STATE_STREAM),
                 ('motor_encoders', JointState, self.on_encoders, STATE_STREAM),
@@ -121,7 +122,7 @@ class ControllerNode(Node):
             response, self.core.enable, bool(request.data)))
         self.outputs = self.create_guard_condition(self.publish_outputs)
         self.planner_ready = None
-        self.create_timer(PLANNER_POLL_S, self.watch_planner)
+        self.planner_timer = self.create_timer(PLANNER_POLL_S, self.watch_planner)
         self.create_timer(1.0, self.publish_diagnostics)
         self.create_timer(GRAPH_WATCH_S, self.watch_graph)
         priority = self.config.realtime_priority
@@ -283,6 +284,13 @@ class ControllerNode(Node):
             moving = self.core.state in (ArmState.PLANNING, ArmState.TRACKING, ArmState.DRIVER)
         self.plans.let_keeper_work(idle and not moving)
         self.plans.keep_presets(idle)
+        self.poll_planner(ready and idle and not moving and self.plans.settled())
+
+    def poll_planner(self, settled: bool) -> None:
+        """Look at the planner every PLANNER_SETTLED_POLL_S when settled, else PLANNER_POLL_S."""
+        period_ns = round(1e9 * (PLANNER_SETTLED_POLL_S if settled else PLANNER_POLL_S))
+        if self.planner_timer.timer_period_ns != period_ns:
+            self.planner_timer.timer_period_ns = period_ns
 
     @guarded
     def watch_graph(self) -> None:
@@ -366,6 +374,7 @@ class ControllerNode(Node):
         if requests:
             self.plans.let_keeper_work(False)      # a goal to plan: not while it moves
             self.plans.send(requests)
+            self.poll_planner(False)
 
     @guarded
     def publish_diagnostics(self) -> None:
