@@ -47,9 +47,9 @@ from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.control.trust import GraphCounts, TrustWatch
 from arm_control.nodes import messages, realtime
-from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
-                                      LATCHED, log_at, loop_statistics, output,
-                                      PLANNER_AVAILABLE, run, STATE_STREAM, status)
+from arm_control.nodes.common import (COMMANDS, declare_parameters, Drained, guarded,
+                                      interrupt, LATCHED, log_at, loop_statistics, output,
+                                      PLANNER_AVAILABLE, run, STATE_STREAM, status, take_all)
 from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.plan_link import PlanLink
 from arm_control.nodes.trajectory_server import TrajectoryServer
@@ -108,12 +108,16 @@ class ControllerNode(Node):
         self.diagnostics_pub = output(self, DiagnosticArray, '/diagnostics', 10)
         for topic, kind, handler, qos in (
                 ('joint_states', JointState, self.on_joint_states, STATE_STREAM),
-                ('motor_encoders', JointState, self.on_encoders, STATE_STREAM),
-                ('battery_state', BatteryState, self.on_battery, STATE_STREAM),
                 ('goal_point', PointStamped, self.on_goal_point, GOALS),
                 ('goal_preset', String, self.on_goal_preset, GOALS),
                 ('driver_velocity', TwistStamped, self.on_driver, GOALS)):
             self.create_subscription(kind, topic, handler, qos)
+        # Taken as each joint_states arrives (a robot sends them first): ``Drained``.
+        self.beside = [(self.create_subscription(kind, topic, handler, STATE_STREAM,
+                                                 callback_group=Drained()), handler)
+                       for topic, kind, handler in (
+                           ('motor_encoders', JointState, self.on_encoders),
+                           ('battery_state', BatteryState, self.on_battery))]
         for name, call in (('~/estop', self.core.estop), ('~/reset', self.core.reset),
                            ('~/cancel', self.core.cancel)):
             self.create_service(Trigger, name, lambda request, response, call=call:
@@ -171,6 +175,8 @@ class ControllerNode(Node):
 
     @guarded
     def on_joint_states(self, msg: JointState) -> None:
+        for subscription, handler in self.beside:
+            take_all(subscription, handler)
         if not self.loop.started():
             return                                  # the sim's clock is not there yet
         self.core.sensing.refuse_leaps |= self.count_publishers('joint_states') > 1
