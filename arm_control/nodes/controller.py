@@ -133,7 +133,9 @@ class ControllerNode(Node):
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
                                 self.get_logger().warning, self.has_reading, self.plans.busy,
                                 self.commander.tick_due)
-        self.publish_outputs()
+        # Not looked for yet: a goal that comes before the first look waits in the queue too.
+        self.planner_ready = False
+        self.command(self.core.on_planner_available, False)
         self.loop.start()
         if priority:         # this thread spins the executor (where refused, the loop said so)
             realtime.raise_this_thread(EXECUTOR_PRIORITY)
