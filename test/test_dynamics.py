@@ -127,6 +127,19 @@ def test_the_batch_form_is_the_scalar_form(arm):
             dynamics.voltage_for(x[i, :2], x[i, 2:], qdd[i]), rel=1e-12)
 
 
+def test_the_written_out_derivative_is_its_parts(arm):
+    """``derivative`` is the forward dynamics of the motors' torque less the friction, to
+    the last bit, at random states and volts (seeded)."""
+    dynamics = ArmDynamics(arm)
+    rng = np.random.default_rng(7)
+    for _ in range(500):
+        x, u = list(rng.uniform(-3.0, 3.0, 4)), list(rng.uniform(-14.0, 14.0, 2))
+        qd = (x[2], x[3])
+        motor, friction = dynamics.motor_torque(qd, u), dynamics.friction_torque(qd)
+        acc = dynamics.acceleration(x, qd, (motor[0] - friction[0], motor[1] - friction[1]))
+        assert dynamics.derivative(x, u) == [x[2], x[3], acc[0], acc[1]]
+
+
 def test_viscous_friction_slows_an_unpowered_joint(arm):
     rubbing = with_joint(arm, 'elbow', viscous_friction_nm_s_per_rad=50.0)
     free, damped = ArmDynamics(arm), ArmDynamics(rubbing)

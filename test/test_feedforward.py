@@ -84,3 +84,30 @@ def test_the_feedforward_stays_within_the_battery_voltage_it_is_given(setup):
     assert peak(8.0) == pytest.approx(8.0)
     assert peak(math.nan) == peak(None)
     assert peak(13.0) <= 12.0
+
+
+def test_holding_still_the_voltage_is_kept_not_solved_again(setup):
+    """At rest at the trajectory's end the feedforward keeps the voltage that held its
+    reference there, without running the model again: the voltage a solve from the setpoint
+    gives (within 1e-9 V), the reference on the setpoint at rest. A weaker battery is a new
+    problem, solved anew."""
+    arm, dynamics, forbidden, limits = setup
+    trajectory = time_optimal_trajectory(UP_TO_THE_FRONT, dynamics, forbidden, limits)
+    feedforward = PeriodFeedforward(dynamics, 0.02, 12.0)
+    times = iter(np.arange(0.0, trajectory.duration_s + 2.0, 0.02))
+    for t in times:
+        if t > trajectory.duration_s + 0.5:
+            break
+        feedforward.step(t, trajectory.sample, 12.0)
+    runs = []
+    model = feedforward._simulate
+    feedforward._simulate = lambda *args, **kwargs: runs.append(1) or model(*args, **kwargs)
+    kept = [feedforward.step(t, trajectory.sample, 12.0) for t, _ in zip(times, range(20))]
+    assert not runs
+    end = trajectory.sample(trajectory.duration_s + 10.0)
+    fresh = PeriodFeedforward(dynamics, 0.02, 12.0)
+    solved = [fresh.step(0.02 * k, lambda _t: end, 12.0) for k in range(3)]
+    np.testing.assert_allclose(kept, [solved[-1]] * len(kept), atol=1e-9)
+    np.testing.assert_array_equal(feedforward.state, np.concatenate([end[0], np.zeros(2)]))
+    feedforward.step(next(times), trajectory.sample, 11.0)
+    assert runs

@@ -76,6 +76,7 @@ class ArmDynamics:
         self._e = np.array(self.emf_v_per_rad_s)
         self._b = np.array(self.viscous)
         self._c = np.array(self.coulomb)
+        self._scalars = (self.volts_per_nm, self.emf_v_per_rad_s, self.viscous, self.coulomb)
 
     # ---------------------------------------------------------------- scalar forms
 
@@ -130,11 +131,21 @@ class ArmDynamics:
                 self.motors[1].voltage_for(needed[1] + friction[1], qd[1]))
 
     def derivative(self, x, u) -> list[float]:
-        """f(x, u) = [θ̇, θ̈] with u the applied motor voltages."""
-        qd = (x[2], x[3])
-        motor, friction = self.motor_torque(qd, u), self.friction_torque(qd)
-        acc = self.acceleration(x, qd, (motor[0] - friction[0], motor[1] - friction[1]))
-        return [x[2], x[3], acc[0], acc[1]]
+        """f(x, u) = [θ̇, θ̈] with u the applied motor voltages: ``acceleration`` of the
+        motor torque (V − e·ω)/k less the friction, written out in one body (the sim and
+        the filter evaluate it thousands of times a second; a test holds it to the parts)."""
+        q0, q1, w0, w1 = x[0], x[1], x[2], x[3]
+        (k0, k1), (e0, e1), (b0, b1), (c0, c1) = self._scalars
+        torque0 = (u[0] - e0 * w0) / k0 - (b0 * w0 + c0 * math.tanh(w0 / COULOMB_SMOOTHING_RAD_S))
+        torque1 = (u[1] - e1 * w1) / k1 - (b1 * w1 + c1 * math.tanh(w1 / COULOMB_SMOOTHING_RAD_S))
+        coupling = self.beta * math.cos(q1)
+        m00, m01, m11 = self.alpha + 2.0 * coupling, self.gamma + coupling, self.gamma
+        h = self.beta * math.sin(q1)
+        fore = self.g_fore * math.cos(q0 + q1)
+        r0 = torque0 - (-h * w1 * w0 - h * (w0 + w1) * w1) - (self.g_upper * math.cos(q0) + fore)
+        r1 = torque1 - h * w0 * w0 - fore
+        det = m00 * m11 - m01 * m01
+        return [w0, w1, (m11 * r0 - m01 * r1) / det, (m00 * r1 - m01 * r0) / det]
 
     def derivative_with_torque(self, x, torque) -> list[float]:
         """f(x, τ) = [θ̇, θ̈] with τ applied directly at the joints (no motor, no friction)."""

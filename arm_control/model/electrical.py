@@ -53,6 +53,7 @@ class PowerSupply:
         # Volts either side of the back-EMF that drive the current limit through one motor.
         self.current_window_v = tuple(limit * motor.resistance_ohm
                                       for limit, motor in zip(self.current_limit_a, motors))
+        self._emf_pair = tuple(m.back_emf_v_per_rad_s for m in motors)
         # ... and the same as arrays, for the batch forms.
         self._window_v = np.array(self.current_window_v)
         self._emf_v_per_rad_s = np.array([m.back_emf_v_per_rad_s for m in motors])
@@ -61,8 +62,11 @@ class PowerSupply:
     def applied_at(self, command_v, speed_rad_s, bus_voltage: float) -> tuple[float, float]:
         """What the motor controllers apply for ``command_v`` at a known bus voltage (the
         roboRIO reads its own): within the current limit, then capped at ±V_bus."""
-        return tuple(min(max(self._within_current_limit(j, command_v[j], speed_rad_s[j]),
-                             -bus_voltage), bus_voltage) for j in range(2))
+        (e0, e1), (w0, w1) = self._emf_pair, self.current_window_v
+        emf0, emf1 = e0 * speed_rad_s[0], e1 * speed_rad_s[1]
+        v0 = min(max(min(max(command_v[0], emf0 - w0), emf0 + w0), -bus_voltage), bus_voltage)
+        v1 = min(max(min(max(command_v[1], emf1 - w1), emf1 + w1), -bus_voltage), bus_voltage)
+        return v0, v1
 
     def _within_current_limit(self, joint: int, command: float, speed: float) -> float:
         """The command moved into [emf − I_limit·R, emf + I_limit·R]."""

@@ -12,6 +12,15 @@ the reference, a motion the arm can follow exactly. The reference moves as the r
 motor controllers apply each held voltage (``PowerSupply.solve_many``: within the current
 limits and the bus it sags), so a command they lower moves the reference as it moves the
 arm; the Newton step itself is taken in the model alone.
+
+Holding still, nothing changes from one period to the next: the setpoint rests at one angle
+over the periods ahead, the reference sits on it, and the voltage that held it there holds it
+again. Once a period has shown that (the reference, driven by the last voltage, ended within
+``HOLD_TOLERANCE`` of the setpoint at rest and the new voltage equals the last), the voltage
+is kept and the reference put on the setpoint, until the setpoint moves or the battery (or
+the limit) changes by ``BATTERY_TOLERANCE_V``: the same answer, without solving it again
+every period. (At rest the answer does not depend on the battery at all unless a voltage is
+clipped to it, and the kept ones are below the limit by more than that.)
 """
 
 import math
@@ -20,6 +29,13 @@ import numpy as np
 
 from arm_control.model.dynamics import ArmDynamics, rk4_batch
 from arm_control.model.electrical import PowerSupply
+
+# A reference this close to a setpoint at rest (rad, rad/s), driven by a voltage this close
+# to the last (V), is held by it: the next periods would solve the same problem again.
+HOLD_TOLERANCE = 1e-9
+# ... until the battery's voltage, or the limit, has moved this far from the one it was
+# solved at (V): a reading of it rounds to float32 and swings with every command.
+BATTERY_TOLERANCE_V = 0.01
 
 
 class PeriodFeedforward:
@@ -42,9 +58,10 @@ class PeriodFeedforward:
         self.state = None               # the reference [θa, θb, ωa, ωb] at time_s
         self.time_s = -math.inf
         self.voltage = self.next_voltage = np.zeros(2)
+        self.holding = None             # what a kept voltage holds: (setpoint q, limit, bus)
 
     def reset(self) -> None:
-        self.state = None
+        self.state = self.holding = None
 
     def _simulate(self, x, volts, duration_s, applied=True, substep_s=None):
         """States (P, 4) after holding each of ``volts`` (P, k, 2) for ``duration_s`` in
@@ -75,14 +92,21 @@ class PeriodFeedforward:
             limit = min(limit, float(battery_voltage))
         q_sp, qd_sp, _ = setpoint(now_s)
         here = np.concatenate([q_sp, qd_sp])
-        if self.state is not None and 0.0 < now_s - self.time_s <= 2.5 * period:
+        samples = [setpoint(now_s + fraction * period) for fraction in (0, 0.5, 1, 1.5, 2)]
+        rest = _at_rest(samples, limit, self.supply.nominal_voltage)
+        if self.state is not None and _same_rest(rest, self.holding):
+            self.state, self.time_s = here, now_s
+            return self.voltage.copy()
+        driven = self.state is not None and 0.0 < now_s - self.time_s <= 2.5 * period
+        if driven:
             self.state = self._simulate(self.state[None], self.voltage[None, None],
                                         now_s - self.time_s)[0]
         if (self.state is None or not 0.0 <= now_s - self.time_s <= 2.5 * period
                 or np.max(np.abs(self.state[:2] - q_sp)) > self.restart_rad):
-            self.state = here
+            self.state, driven = here, False
         self.time_s = now_s
-        samples = [setpoint(now_s + fraction * period) for fraction in (0, 0.5, 1, 1.5, 2)]
+        # The last voltage kept the reference on the setpoint at rest (simulated, not assumed).
+        held = driven and rest is not None and np.max(np.abs(self.state - here)) <= HOLD_TOLERANCE
         volts = self.dynamics.voltages(*(np.array(v) for v in zip(*samples)))
         guess = np.concatenate([(volts[0] + 4 * volts[1] + volts[2]) / 6,
                                 (volts[2] + 4 * volts[3] + volts[4]) / 6])
@@ -101,6 +125,26 @@ class PeriodFeedforward:
             guess = guess - np.linalg.solve(jacobian, ends[0] - target)
         except np.linalg.LinAlgError:
             pass
+        last = self.voltage
         self.voltage = np.clip(guess[:2], -limit, limit)
         self.next_voltage = np.clip(guess[2:], -limit, limit)     # the period after
+        steady = np.max(np.abs(np.concatenate([last, self.next_voltage])
+                               - np.tile(self.voltage, 2))) <= HOLD_TOLERANCE
+        within = np.max(np.abs(guess)) < limit - BATTERY_TOLERANCE_V
+        self.holding = rest if held and steady and within else None
         return self.voltage.copy()
+
+
+def _at_rest(samples, limit: float, bus: float):
+    """(q, limit, bus) when the setpoint samples all rest at one angle q; else None."""
+    q = samples[0][0]
+    for q_k, qd_k, qdd_k in samples:
+        if np.any(q_k != q) or np.any(qd_k) or np.any(qdd_k):
+            return None
+    return float(q[0]), float(q[1]), limit, bus
+
+
+def _same_rest(rest, holding) -> bool:
+    """The same angle, the limit and the battery within ``BATTERY_TOLERANCE_V``."""
+    return rest is not None and holding is not None and rest[:2] == holding[:2] and all(
+        abs(a - b) <= BATTERY_TOLERANCE_V for a, b in zip(rest[2:], holding[2:]))

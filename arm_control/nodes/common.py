@@ -14,6 +14,8 @@ from typing import Optional
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
+from rclpy.callback_groups import CallbackGroup
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -158,6 +160,41 @@ def guarded(callback):
                 response.success, response.message = False, f'failed: {error!r}'
             return response
     return wrapper
+
+
+def output(node, kind, topic: str, qos):
+    """A publisher with no QoS event handlers: each handler is one more entity the executor
+    gathers on every wake, hundreds a second in the controller; a subscriber whose QoS does
+    not match says so itself."""
+    return node.create_publisher(kind, topic, qos,
+                                 event_callbacks=PublisherEventCallbacks(
+                                     use_default_callbacks=False))
+
+
+class Drained(CallbackGroup):
+    """Subscriptions no executor waits on or calls back: their messages stay in their readers
+    until the node takes them (``take_all``). For inputs read only beside another, that comes
+    right after them: each message would wake the executor, which gathers every entity of
+    the node on every wake."""
+
+    def can_execute(self, entity) -> bool:
+        return False
+
+    def beginning_execution(self, entity) -> bool:
+        return False
+
+    def ending_execution(self, entity) -> None:
+        pass
+
+
+def take_all(subscription, handler) -> None:
+    """Every message waiting in ``subscription``'s reader, oldest first, to ``handler``."""
+    while True:
+        with subscription.handle:
+            taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+        if taken is None:
+            return
+        handler(taken[0])
 
 
 def log_at(logger, level: str, text: str) -> None:

@@ -51,15 +51,16 @@ from arm_control.control.state_machine import ArmState
 from arm_control.control.trust import GraphCounts, TrustWatch
 from arm_control.nodes import messages
 from arm_control.nodes.claim_link import ClaimLink
-from arm_control.nodes.common import (COMMANDS, declare_parameters, guarded, interrupt,
-                                      LATCHED, log_at, loop_statistics, PLANNER_AVAILABLE,
-                                      run, STATE_STREAM, status)
+from arm_control.nodes.common import (COMMANDS, declare_parameters, Drained, guarded,
+                                      interrupt, LATCHED, log_at, loop_statistics, output,
+                                      PLANNER_AVAILABLE, run, STATE_STREAM, status, take_all)
 from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.plan_link import PlanLink
 from arm_control.nodes.trajectory_server import TrajectoryServer
 from arm_control.parameters import ParameterError
 
-PLANNER_POLL_S = 0.05             # how often to look whether the planner is there
+PLANNER_POLL_S = 0.05             # how often to look whether the planner is there ...
+PLANNER_SETTLED_POLL_S = 0.5      # ... once it is, with nothing asked of it and no goal
 GRAPH_WATCH_S = 0.5               # how often to count who else publishes its topics
 # The executor's thread (messages, services) at SCHED_FIFO this low when the loop is at real
 # time: above every normal process, below the loop. At normal priority a busy machine can
@@ -103,21 +104,25 @@ class ControllerNode(Node):
         self.last_command = None                    # the last sent: a pair or a Profile
         sys.setswitchinterval(0.001)   # another thread waits 1 ms for Python, not 5
 
-        self.voltage_pub = self.create_publisher(Float64MultiArray, 'voltage_command', COMMANDS)
-        self.setpoint_pub = self.create_publisher(JointState, '~/setpoint', STATE_STREAM)
-        self.estimate_pub = self.create_publisher(JointState, '~/estimate', STATE_STREAM)
-        self.state_pub = self.create_publisher(String, 'arm_state', LATCHED)
-        self.queue_pub = self.create_publisher(Path, '~/goal_queue', LATCHED)
-        self.events_pub = self.create_publisher(String, '~/events', EVENTS)
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.voltage_pub = output(self, Float64MultiArray, 'voltage_command', COMMANDS)
+        self.setpoint_pub = output(self, JointState, '~/setpoint', STATE_STREAM)
+        self.estimate_pub = output(self, JointState, '~/estimate', STATE_STREAM)
+        self.state_pub = output(self, String, 'arm_state', LATCHED)
+        self.queue_pub = output(self, Path, '~/goal_queue', LATCHED)
+        self.events_pub = output(self, String, '~/events', EVENTS)
+        self.diagnostics_pub = output(self, DiagnosticArray, '/diagnostics', 10)
         for topic, kind, handler, qos in (
                 ('joint_states', JointState, self.on_joint_states, STATE_STREAM),
-                ('motor_encoders', JointState, self.on_encoders, STATE_STREAM),
-                ('battery_state', BatteryState, self.on_battery, STATE_STREAM),
                 ('goal_point', PointStamped, self.on_goal_point, GOALS),
                 ('goal_preset', String, self.on_goal_preset, GOALS),
                 ('driver_velocity', TwistStamped, self.on_driver, GOALS)):
             self.create_subscription(kind, topic, handler, qos)
+        # Taken as each joint_states arrives (a robot sends them first): ``Drained``.
+        self.beside = [(self.create_subscription(kind, topic, handler, STATE_STREAM,
+                                                 callback_group=Drained()), handler)
+                       for topic, kind, handler in (
+                           ('motor_encoders', JointState, self.on_encoders),
+                           ('battery_state', BatteryState, self.on_battery))]
         for name, call in (('~/estop', self.core.estop), ('~/reset', self.core.reset),
                            ('~/cancel', self.core.cancel)):
             self.create_service(Trigger, name, lambda request, response, call=call:
@@ -126,14 +131,16 @@ class ControllerNode(Node):
             response, self.core.enable, bool(request.data)))
         self.outputs = self.create_guard_condition(self.publish_outputs)
         self.planner_ready = None
-        self.create_timer(PLANNER_POLL_S, self.watch_planner)
+        self.planner_timer = self.create_timer(PLANNER_POLL_S, self.watch_planner)
         self.create_timer(1.0, self.publish_diagnostics)
         self.create_timer(GRAPH_WATCH_S, self.watch_graph)
         priority = self.config.realtime_priority
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
                                 self.get_logger().warning, self.has_reading, self.plans.busy,
                                 self.commander.tick_due)
-        self.publish_outputs()
+        # Not looked for yet: a goal that comes before the first look waits in the queue too.
+        self.planner_ready = False
+        self.command(self.core.on_planner_available, False)
         self.loop.start()
         if priority:         # this thread spins the executor (where refused, the loop said so)
             realtime.raise_this_thread(EXECUTOR_PRIORITY)
@@ -178,6 +185,8 @@ class ControllerNode(Node):
 
     @guarded
     def on_joint_states(self, msg: JointState) -> None:
+        for subscription, handler in self.beside:
+            take_all(subscription, handler)
         if not self.loop.started():
             return                                  # the sim's clock is not there yet
         self.core.sensing.refuse_leaps |= self.count_publishers('joint_states') > 1
@@ -299,6 +308,13 @@ class ControllerNode(Node):
             moving = self.core.state in (ArmState.PLANNING, ArmState.TRACKING, ArmState.DRIVER)
         self.plans.let_keeper_work(idle and not moving)
         self.plans.keep_presets(idle)
+        self.poll_planner(ready and idle and not moving and self.plans.settled())
+
+    def poll_planner(self, settled: bool) -> None:
+        """Look at the planner every PLANNER_SETTLED_POLL_S when settled, else PLANNER_POLL_S."""
+        period_ns = round(1e9 * (PLANNER_SETTLED_POLL_S if settled else PLANNER_POLL_S))
+        if self.planner_timer.timer_period_ns != period_ns:
+            self.planner_timer.timer_period_ns = period_ns
 
     @guarded
     def watch_graph(self) -> None:
@@ -388,6 +404,7 @@ class ControllerNode(Node):
         if requests:
             self.plans.let_keeper_work(False)      # a goal to plan: not while it moves
             self.plans.send(requests)
+            self.poll_planner(False)
 
     @guarded
     def publish_diagnostics(self) -> None:

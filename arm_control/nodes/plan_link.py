@@ -77,6 +77,10 @@ class PlanLink:
                 self._call(request, sends + 1)
         return self.found and self.worker.ready.is_set()
 
+    def settled(self) -> bool:
+        """Nothing open with the planner and no path between presets left to ask for."""
+        return not self.calls and self.preset_call is None and not self.presets_to_keep
+
     def busy(self) -> bool:
         """A plan is being made or timed (wall-time work): a call open, or the worker at it."""
         return bool(self.calls) or self.worker.busy

@@ -12,9 +12,11 @@ process goes.
 A plan from rest is answered twice: first a quick trajectory the arm starts on at once, then
 its refinement (``PlanTimer.refine``) from a hand-over time a safe margin past when the
 refinement is expected to be ready -- unless a newer request is already waiting -- and,
-when it took so long that it surely came too late, once more from later on. At start-up,
-before it says it is ready, the worker answers a move between two presets for itself, so
-the first goal finds its caches warm.
+when it took so long that it surely came too late, once more from later on. The worker says
+it is ready once its timing kernels are loaded; then, only while no request waits, it warms
+up in slices (``_WarmUp``: the forbidden-space cells its checks look up, a move between two
+presets answered for itself, the moving-start solver imported), so that later goals find
+the caches warm while the first one is never kept waiting for all of it.
 
 Each path answered from rest then goes to the keeper, a second process at nice
 ``KEEPER_NICE``, which times it finely from rest; the worker keeps what comes back
@@ -63,6 +65,7 @@ RETRY_SHARE = 0.7
 # the latest first.
 KEEPER_NICE = 10
 KEEPER_QUEUE = 256
+PROVE_TILES = 64            # forbidden-space cells proved per slice of the warm-up (ms each)
 FIRST_RATIO = 12.0
 RATIO_MEMORY = 0.7
 
@@ -88,12 +91,15 @@ def _serve(requests: Connection, results: Connection) -> None:
     """The worker (``plan_messages``): times each plan with the latest ``Settings``, the
     answers from rest in two (the quick one, then its refinement), then says the request
     ``Done``; hands the keeper the paths worth keeping and keeps what it times."""
-    timer = None
+    timer = warm_up = None
     clock = HandoverClock()
     incoming = _Incoming(requests)
     keeping = _Keeping()
     try:
         while True:
+            if warm_up is not None and not incoming.waiting and not requests.poll():
+                warm_up = warm_up if warm_up.step(timer, clock) else None
+                continue
             keeper = keeping.keeper
             if not incoming.waiting and keeper is not None \
                     and requests not in wait([requests, keeper.results]):
@@ -111,14 +117,9 @@ def _serve(requests: Connection, results: Connection) -> None:
                     keeping.retune(settings)
                     results.send(Kept(0))
                     if first:
-                        # Ready once warm: the moving-start solver imported and a first move
-                        # timed, so that the first goal waits for neither (on a starved
-                        # machine both take seconds).
-                        importing = threading.Thread(target=toppra_solver, daemon=True)
-                        importing.start()
-                        _warm_up(timer, clock)
-                        importing.join()
+                        compile_kernels()       # loaded from numba's cache, or compiled
                         results.send(Ready())
+                        warm_up = _WarmUp()
                 case Keeping(allowed):
                     keeping.allow(allowed)
                 case KeepPath(request, plan):
@@ -346,12 +347,30 @@ def _refine(timer: PlanTimer, clock: HandoverClock, timed: TimedPlan, sent: floa
             return
 
 
-def _warm_up(timer: PlanTimer, clock: HandoverClock) -> None:
-    """Prove every forbidden-space cell the checks look up, then answer a move between the
-    first two presets and throw the answers away: the first goal then finds the caches warm
-    (the cells, numpy's and numba's first calls) and the hand-over clock set."""
-    compile_kernels()
-    timer.ranking.prove_cells()            # 0.4 s, not 2-3x on each new goal
+class _WarmUp:
+    """What the worker does while no request waits, a slice at a time: prove the
+    forbidden-space cells the checks look up (``PROVE_TILES`` a slice: in all ~0.4 s of CPU
+    the goals would otherwise pay for two to three times over), then answer a move between
+    the first two presets and throw the answers away (numpy's and numba's first calls, the
+    hand-over clock set), then start importing the moving-start solver (toppra, ~0.4 s)."""
+
+    def __init__(self):
+        self.stage = 0
+
+    def step(self, timer: PlanTimer, clock: HandoverClock) -> bool:
+        """One slice; False once all is done."""
+        if self.stage == 0:
+            self.stage += timer.ranking.prove_cells(PROVE_TILES)
+        elif self.stage == 1:
+            self.stage += 1
+            _answer_between_presets(timer, clock)
+        elif self.stage == 2:
+            self.stage += 1             # in a thread of its own: a request need not wait
+            threading.Thread(target=toppra_solver, daemon=True).start()
+        return self.stage < 3
+
+
+def _answer_between_presets(timer: PlanTimer, clock: HandoverClock) -> None:
     presets = timer.arm.presets
     if len(presets) < 2:
         return

@@ -93,10 +93,12 @@ class TrajectoryServer:
         self.settings = FollowSettings.from_parameters(params)
         self.config = node.config
         self.goals = TrajectoryGoals(node.arm, node.config, self.settings)
-        compile_kernels()           # before the loop starts: a first retiming compiles them
         self.count = 0
         self.active = None
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='trajectories')
+        # The retiming's kernels, loaded (or compiled) first thing in the thread that retimes:
+        # a trajectory waits behind them, the node's start and its first goal do not.
+        self.worker.submit(compile_kernels)
         node.create_subscription(JointTrajectory, '~/joint_trajectory', self.on_topic,
                                  COMMANDS)
         self.server = None
