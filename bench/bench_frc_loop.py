@@ -46,18 +46,24 @@ from sensor_msgs.msg import BatteryState, JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
 from arm_control import config  # noqa: E402
+from arm_control.control.events import parse_event  # noqa: E402
 from arm_control.frc.conversions import joint_effort_nm  # noqa: E402
 from arm_control.frc.robot_sim import RobotStandIn  # noqa: E402
 from arm_control.frc.settings import load_robot_sim  # noqa: E402
 from arm_control.frc.tables import free_port, now_us  # noqa: E402
 from arm_control.model.dynamics import ArmDynamics  # noqa: E402
 from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED  # noqa: E402
-from arm_control.nodes.realtime import raise_process  # noqa: E402
+from arm_control.nodes.realtime import raise_dds_threads, raise_process  # noqa: E402
 
 GOALS = ('mid_score', 'high_score', 'back_score')
 HOLD_S, HOLD_SPEED_RAD_S, HOLD_SWING_RAD = 2.0, 0.1, np.radians(0.5)
 REACH_TIMEOUT_S = 20.0
 PROBE_PRIORITY = 30                 # SCHED_FIFO of the probe's threads (the robot's: 50)
+PROBE_DDS_PRIORITY = 1              # ... of its DDS threads: the controller's for its own
+# Python hands its lock to a waiting thread after this long: the robot's NT threads time a
+# command's arrival in this process and wait for the lock behind the probe or the robot's loop
+# (Python's default, 5 ms, is the size of the commands' bar; a robot in Java or C++ has none).
+SWITCH_INTERVAL_S = 0.0005
 
 
 class Robot:
@@ -103,6 +109,12 @@ class Coprocessor:
     def __init__(self, domain: int, port: int, log_dir: Path):
         from ros_harness import NodeProcess, Probe
         self.probe = Probe(domain, 'bench_frc_loop')
+        # Its DDS threads (they receive what it hears) at the controller's priority for its
+        # own: at normal priority under load they wait in the run queue, and the transit
+        # measured would be theirs, not the bridge's.
+        self.priority_problem = raise_dds_threads(PROBE_DDS_PRIORITY)
+        if self.priority_problem:
+            print(self.priority_problem)
         self.nodes = [NodeProcess('frc_bridge', domain, ['-p', f'nt_port:={port}'], log_dir),
                       NodeProcess('planner', domain, (), log_dir),
                       NodeProcess('controller', domain, (), log_dir)]
@@ -110,8 +122,10 @@ class Coprocessor:
         self.heard = {name: [] for name in ('joint_states', 'battery', 'events', 'states',
                                             'controller_events', 'diagnostics')}
         from diagnostic_msgs.msg import DiagnosticArray
+        # joint_states with DDS's times: (heard, message, published by the bridge, received).
+        self.joint_states = []
+        node.create_subscription(JointState, '/joint_states', self._keep_timed, 50)
         for name, msg_type, topic, qos in (
-                ('joint_states', JointState, '/joint_states', 50),
                 ('battery', BatteryState, '/battery_state', 50),
                 ('events', String, '/frc_bridge/events', 100),
                 ('states', String, '/arm_state', LATCHED),
@@ -119,6 +133,13 @@ class Coprocessor:
                 ('diagnostics', DiagnosticArray, '/diagnostics', 50)):
             node.create_subscription(msg_type, topic, self._keep(self.heard[name]), qos)
         self.goal_pub = node.create_publisher(PointStamped, '/goal_point', COMMANDS)
+
+    def _keep_timed(self, message, info) -> None:
+        heard = time.time()
+        self.heard['joint_states'].append((heard, message))
+        self.joint_states.append((heard, stamp_s(message.header),
+                                  1e-9 * info['source_timestamp'],
+                                  1e-9 * info['received_timestamp']))
 
     @staticmethod
     def _keep(into):
@@ -154,11 +175,15 @@ def goal(copro, robot, name, x, y) -> dict:
         lambda: copro.said('controller_events', 'reached', since), REACH_TIMEOUT_S))
     move_s = (copro.said('controller_events', 'reached', since) or [np.nan])[0] - since
     copro.probe.spin_for(HOLD_S + 0.1)
-    held = np.array([s for t, s in robot.truth if t > time.time() - HOLD_S])
+    from_s = time.time() - HOLD_S
+    held = np.array([s for t, s in robot.truth if t > from_s])
     speed = np.max(np.abs(held[:, 2:])) if len(held) else np.inf
     swing = np.max(np.ptp(held[:, :2], axis=0)) if len(held) else np.inf
-    return {'reached': reached, 'move_s': move_s, 'speed': speed, 'swing': swing,
-            'held': reached and speed < HOLD_SPEED_RAD_S and swing < HOLD_SWING_RAD}
+    volts = np.array([r.applied_voltage_v for us, r in list(robot.published.items())
+                      if us * 1e-6 > from_s]).reshape(-1, 2)
+    return {'name': name, 'reached': reached, 'move_s': move_s, 'speed': speed,
+            'swing': swing, 'held': reached and speed < HOLD_SPEED_RAD_S and
+            swing < HOLD_SWING_RAD, 'volts_ptp': np.ptp(volts, axis=0) if len(volts) else ()}
 
 
 def mixed_readings(copro, robot, since_s) -> tuple[int, int, float]:
@@ -208,6 +233,18 @@ def bridge_reading_ages(copro, since_s) -> tuple[float, float]:
     return (np.median(p50) if p50 else np.nan), 100.0 * older / max(total, 1)
 
 
+def controller_hearing(copro, since_s, until_s, drop_window) -> tuple[float, int]:
+    """(the oldest ``joint_states`` the controller took, ms, from its /diagnostics' per-second
+    worst; its ``sensors_lost`` events outside the drop), from ``since_s`` to ``until_s``."""
+    worst = [float(v.value) for t, m in copro.heard['diagnostics'] if since_s <= t <= until_s
+             for status in m.status for v in status.values
+             if v.key == 'joint_states age worst (ms)']
+    lost = [t for t, m in copro.heard['controller_events'] if since_s <= t and
+            parse_event(m.data)[0] == 'sensors_lost' and
+            not drop_window[0] <= t <= drop_window[1] + 0.3]
+    return max(worst, default=np.nan), len(lost)
+
+
 def disable(copro, robot) -> tuple[float, float]:
     """(ms to the robot's first reading disabled at 0 V, ms to arm_state disabled)."""
     since = time.time()
@@ -246,6 +283,20 @@ def robot_stalls(robot, since_s) -> list:
     return [(times[i], times[i + 1]) for i in gaps]
 
 
+def stamp_s(header) -> float:
+    return header.stamp.sec + 1e-9 * header.stamp.nanosec
+
+
+def transit_segments(copro, since_s) -> dict:
+    """A reading's way to ``joint_states`` heard, in ms per message, in three legs: the
+    sensors' instant to the bridge's publish (DDS's source time), DDS on to the probe's
+    process (its received time), and that process's executor on to the callback."""
+    rows = np.array([row for row in copro.joint_states if row[0] >= since_s]).reshape(-1, 4)
+    heard, stamp, published, received = rows.T
+    return {'total': 1e3 * (heard - stamp), 'bridge': 1e3 * (published - stamp),
+            'dds': 1e3 * (received - published), 'probe': 1e3 * (heard - received)}
+
+
 def percentiles(values_ms) -> str:
     values_ms = np.asarray(values_ms)
     if not len(values_ms):
@@ -263,12 +314,23 @@ def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
     moves = [goal(copro, robot, name, *presets[name]) for name in GOALS]
     mixed, checked, stamp_error_ms = mixed_readings(copro, robot, since)
     bridge_p50, bridge_over = bridge_reading_ages(copro, since)
-    transit_in = [1e3 * (t - (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec))
-                  for t, m in copro.heard['joint_states'] if t >= since]
+    legs = transit_segments(copro, since)
+    transit_in = legs['total']
+    legs_p99 = ' / '.join(f'{np.percentile(legs[leg], 99):.1f}' if len(legs[leg]) else '-'
+                          for leg in ('bridge', 'dds', 'probe'))
+    print(f'phase {phase_ms} {load}: ' + ', '.join(
+        f'{leg} {percentiles(ms)} max {np.max(ms, initial=0):.1f}' for leg, ms in legs.items()),
+        file=sys.stderr)
+    for m in moves:
+        print(f"  {m['name']}: move {m['move_s']:.2f} s, held speed {m['speed']:.3f}, "
+              f"swing {np.degrees(m['swing']):.2f} deg, applied V range "
+              f"{np.round(m['volts_ptp'], 2)}", file=sys.stderr)
     transit_out = [1e-3 * (arrived - sent) for arrived, sent in robot.arrivals[arrivals_from:]]
+    goals_until = time.time()
     to_zero_ms, to_disabled_ms = disable(copro, robot)
     lost_ms, back_ms, window = drop(copro, robot)
     stalls = robot_stalls(robot, since)
+    controller_age_ms, controller_lost = controller_hearing(copro, since, goals_until, window)
     false_lost = [(t, m.data) for t, m in copro.heard['events'] if t >= since and
                   'lost the robot' in m.data and not window[0] <= t <= window[1] and
                   not any(a <= t <= b + 0.3 for a, b in stalls)]
@@ -282,23 +344,26 @@ def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
             f"{max(m['move_s'] for m in moves):.2f} | {max(m['speed'] for m in moves):.3f} | "
             f"{np.degrees(max(m['swing'] for m in moves)):.2f} | {mixed}/{checked} | "
             f'{stamp_error_ms:.2f} | {bridge_p50:.1f} / {bridge_over:.1f} | '
-            f'{percentiles(transit_in)} | {percentiles(transit_out)} | {to_zero_ms:.0f} | '
+            f'{percentiles(transit_in)} | {legs_p99} | {controller_age_ms:.0f} | '
+            f'{controller_lost} | {percentiles(transit_out)} | {to_zero_ms:.0f} | '
             f'{to_disabled_ms:.0f} | {lost_ms:.0f} | {back_ms:.0f} | {false_lost} | '
             f'{len(stalls)} |')
 
 
 HEADER = ('| load | phase ms | goals reached & held | slowest move s | hold: fastest joint '
           'rad/s | hold: swing deg | mixed readings | stamp error ms | reading → bridge '
-          'p50 ms / % over 10 ms | reading → joint_states heard p50 / p99 ms | '
+          'p50 ms / % over 10 ms | reading → joint_states heard p50 / p99 ms | its p99 legs: '
+          'bridge / DDS / probe ms | controller: oldest joint_states ms | controller: '
+          'sensors lost | '
           'command → robot p50 / p99 ms | disabled → 0 V ms | disabled → arm_state ms | '
           'drop → lost ms | served → back ms | false lost | robot stalls > 0.1 s |\n'
-          '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+          '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
 
 
-def set_priority(priority: int) -> None:
-    """This thread at SCHED_FIFO ``priority``, or normal scheduling for 0 (what it starts
-    inherits it)."""
-    os.sched_setscheduler(0, os.SCHED_FIFO if priority else os.SCHED_OTHER,
+def set_priority(priority: int, thread_id: int = 0) -> None:
+    """A thread (0: this one) at SCHED_FIFO ``priority``, or normal scheduling for 0 (what
+    it starts inherits it)."""
+    os.sched_setscheduler(thread_id, os.SCHED_FIFO if priority else os.SCHED_OTHER,
                           os.sched_param(priority))
 
 
@@ -313,6 +378,7 @@ def main() -> None:
     args = parser.parse_args()
     import busy
     from ros_harness import ros_domain
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     presets = {name: (x, y) for name, x, y in config.load('sim')[0].presets}
     rows = []
     port = free_port()

@@ -6,6 +6,7 @@ which the controller never sees.
 
 import dataclasses
 import math
+import os
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, TwistStamped
@@ -24,7 +25,7 @@ from arm_control.control.plans import preset_pairs
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.profile import Profile
 from arm_control.model.world import ForbiddenSpace
-from arm_control.nodes import messages
+from arm_control.nodes import messages, realtime
 from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED
 
 SETTLE_TIMEOUT_S = 40.0
@@ -328,3 +329,31 @@ def test_live_tuning_takes_good_values_and_refuses_bad_ones(launch, probe):
     probe.spin_for(0.3)
     q, qd, xy = tool_track(config.load('sim')[0], truth)
     assert np.linalg.norm(xy[-1] - (0.6, 1.6)) < 0.031
+
+
+def test_the_controller_receives_at_its_executor_s_priority(launch, probe):
+    """A reading must not wait behind busy processes before the executor takes it: the
+    controller's DDS threads (Fast DDS's ``dds.*``, which receive) are SCHED_FIFO at the
+    executor's priority, below its loop; where the system refuses, the node says how to
+    allow it."""
+    from arm_control.nodes.controller import EXECUTOR_PRIORITY
+    controller = launch('controller')
+    tasks = f'/proc/{controller.process.pid}/task'
+
+    def dds_policies():
+        found = set()
+        for thread_id in realtime.dds_threads(tasks):
+            try:
+                found.add((os.sched_getscheduler(thread_id),
+                           os.sched_getparam(thread_id).sched_priority))
+            except ProcessLookupError:                      # a thread that ended meanwhile
+                pass
+        return found
+    fifo = {(os.SCHED_FIFO, EXECUTOR_PRIORITY)}
+    assert probe.spin_until(lambda: dds_policies() == fifo
+                            or 'real-time priority' in controller.output(), 30.0), \
+        dds_policies()
+    if 'real-time priority' in controller.output():
+        assert 'rtprio' in controller.output()              # how to allow it
+    else:
+        assert dds_policies() == fifo
