@@ -297,10 +297,11 @@ def transit_segments(copro, since_s) -> dict:
             'dds': 1e3 * (received - published), 'probe': 1e3 * (heard - received)}
 
 
-def others_realtime_cpu_s() -> float:
-    """CPU seconds used so far by the real-time threads (SCHED_FIFO, SCHED_RR) of every
-    process on the machine that is not this bench's: other users' loops compete with the
-    bridge's and the robot's threads, which no priority below theirs escapes."""
+def others_realtime_ticks() -> dict:
+    """{(pid, tid): (CPU clock ticks so far, real-time now)} of every thread of every process
+    on the machine that is not this bench's: other users' real-time loops (SCHED_FIFO,
+    SCHED_RR) compete with the bridge's and the robot's threads, which no priority below
+    theirs escapes."""
     parents = {}
     for pid in filter(str.isdigit, os.listdir('/proc')):
         try:
@@ -312,17 +313,25 @@ def others_realtime_cpu_s() -> float:
     while grown:                                    # this process and its descendants
         grown = {pid for pid, parent in parents.items() if parent in ours} - ours
         ours |= grown
-    ticks = 0
+    ticks = {}
     for pid in set(parents) - ours:
         try:
             for tid in os.listdir(f'/proc/{pid}/task'):
                 with open(f'/proc/{pid}/task/{tid}/stat') as stat:
                     fields = stat.read().rsplit(')', 1)[1].split()
-                if int(fields[38]) in (os.SCHED_FIFO, os.SCHED_RR):     # field 41: policy
-                    ticks += int(fields[11]) + int(fields[12])          # utime, stime
+                ticks[pid, tid] = (int(fields[11]) + int(fields[12]),   # utime, stime
+                                   int(fields[38]) in (os.SCHED_FIFO, os.SCHED_RR))  # policy
         except (OSError, IndexError, ValueError):                       # gone meanwhile
             pass
-    return ticks / os.sysconf('SC_CLK_TCK')
+    return ticks
+
+
+def others_realtime_cores(before: dict, after: dict, seconds: float) -> float:
+    """Cores other users' real-time threads kept busy between two ``others_realtime_ticks``
+    (a thread that ended meanwhile is not counted: at least this much)."""
+    used = sum(ticks - before.get(key, (0, False))[0]
+               for key, (ticks, realtime) in after.items() if realtime)
+    return used / os.sysconf('SC_CLK_TCK') / seconds
 
 
 def percentiles(values_ms) -> str:
@@ -338,7 +347,7 @@ def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
     robot.stand_in.apply_on_arrival(reference)
     copro.probe.spin_for(1.0)
     since = time.time()
-    others_from_s = others_realtime_cpu_s()
+    others_from = others_realtime_ticks()
     arrivals_from = len(robot.arrivals)
     moves = [goal(copro, robot, name, *presets[name]) for name in GOALS]
     mixed, checked, stamp_error_ms = mixed_readings(copro, robot, since)
@@ -356,7 +365,8 @@ def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
               f"{np.round(m['volts_ptp'], 2)}", file=sys.stderr)
     transit_out = [1e-3 * (arrived - sent) for arrived, sent in robot.arrivals[arrivals_from:]]
     goals_until = time.time()
-    others_cores = (others_realtime_cpu_s() - others_from_s) / (goals_until - since)
+    others_cores = others_realtime_cores(others_from, others_realtime_ticks(),
+                                         goals_until - since)
     to_zero_ms, to_disabled_ms = disable(copro, robot)
     lost_ms, back_ms, window = drop(copro, robot)
     stalls = robot_stalls(robot, since)
