@@ -47,6 +47,7 @@ from std_msgs.msg import String  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.events import parse_event  # noqa: E402
+from arm_control.frc.codec import ProfileCommand  # noqa: E402
 from arm_control.frc.conversions import joint_effort_nm  # noqa: E402
 from arm_control.frc.robot_sim import RobotStandIn  # noqa: E402
 from arm_control.frc.settings import load_robot_sim  # noqa: E402
@@ -77,6 +78,15 @@ class Robot:
         self.truth = []                 # (t_s, [q, q, qd, qd])
         self.arrivals = []              # (reached the robot µs, set by the bridge µs)
         self.stand_in.observer = self.observe
+        self.taken = []                 # (loop instant s, the profile's setpoint-0 instant s)
+        take = self.stand_in.arrived
+
+        def arrived(now_s):
+            commands = take(now_s)
+            self.taken += [(now_s, c.time_us * 1e-6) for c in commands
+                           if isinstance(c, ProfileCommand)]
+            return commands
+        self.stand_in.arrived = arrived
         import ntcore
         tables = self.stand_in.tables
         self.listener = tables.instance.addListener(
@@ -348,7 +358,7 @@ def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
     copro.probe.spin_for(1.0)
     since = time.time()
     others_from = others_realtime_ticks()
-    arrivals_from = len(robot.arrivals)
+    arrivals_from, taken_from = len(robot.arrivals), len(robot.taken)
     moves = [goal(copro, robot, name, *presets[name]) for name in GOALS]
     mixed, checked, stamp_error_ms = mixed_readings(copro, robot, since)
     bridge_p50, bridge_over = bridge_reading_ages(copro, since)
@@ -364,6 +374,12 @@ def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
               f"swing {np.degrees(m['swing']):.2f} deg, applied V range "
               f"{np.round(m['volts_ptp'], 2)}", file=sys.stderr)
     transit_out = [1e-3 * (arrived - sent) for arrived, sent in robot.arrivals[arrivals_from:]]
+    # A profile taken at a loop more than half a period after its setpoint 0's instant came
+    # too late for it (the loop plays the setpoint nearest its instant).
+    taken = robot.taken[taken_from:]
+    period_s = 1.0 / robot.stand_in.robot.loop_rate_hz
+    late = sum(loop_s > start_s + 0.5 * period_s for loop_s, start_s in taken)
+    late_text = '-' if reference else f'{late}/{len(taken)}'     # on arrival: not queued
     goals_until = time.time()
     others_cores = others_realtime_cores(others_from, others_realtime_ticks(),
                                          goals_until - since)
@@ -389,7 +405,8 @@ def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
             f"{np.degrees(max(m['swing'] for m in moves)):.2f} | {mixed}/{checked} | "
             f'{stamp_error_ms:.2f} | {bridge_p50:.1f} / {bridge_over:.1f} | '
             f'{percentiles(transit_in)} | {legs_p99} | {controller_age_ms:.0f} | '
-            f'{controller_lost} | {percentiles(transit_out)} | {to_zero_ms:.0f} | '
+            f'{controller_lost} | {percentiles(transit_out)} | '
+            f'{late_text} | {to_zero_ms:.0f} | '
             f'{to_disabled_ms:.0f} | {lost_ms:.0f} | {back_ms:.0f} | {false_lost} | '
             f'{len(stalls)} |')
 
@@ -399,9 +416,11 @@ HEADER = ("| load | others' real-time threads, cores | phase ms | goals reached 
           'stamp error ms | reading → bridge p50 ms / % over 10 ms | reading → joint_states '
           'heard p50 / p99 ms | its p99 legs: bridge / DDS / probe ms | controller: oldest '
           'joint_states ms | controller: sensors lost | '
-          'command → robot p50 / p99 ms | disabled → 0 V ms | disabled → arm_state ms | '
+          'command → robot p50 / p99 ms | profiles taken after their instant | '
+          'disabled → 0 V ms | disabled → arm_state ms | '
           'drop → lost ms | served → back ms | false lost | robot stalls > 0.1 s |\n'
-          '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+          '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|'
+          '---|')
 
 
 def set_priority(priority: int, thread_id: int = 0) -> None:
