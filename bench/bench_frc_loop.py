@@ -43,7 +43,7 @@ sys.path[:0] = [str(HERE.parent / 'test'), str(HERE.parent), str(HERE)]
 from geometry_msgs.msg import PointStamped  # noqa: E402
 import numpy as np  # noqa: E402
 from sensor_msgs.msg import BatteryState, JointState  # noqa: E402
-from std_msgs.msg import String  # noqa: E402
+from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.events import parse_event  # noqa: E402
@@ -143,6 +143,12 @@ class Coprocessor:
                 ('diagnostics', DiagnosticArray, '/diagnostics', 50)):
             node.create_subscription(msg_type, topic, self._keep(self.heard[name]), qos)
         self.goal_pub = node.create_publisher(PointStamped, '/goal_point', COMMANDS)
+        # When the controller published each command (DDS's source time, on NT's clock).
+        self.nt_minus_wall_us = now_us() - time.time() * 1e6
+        self.commanded_us = []
+        node.create_subscription(
+            Float64MultiArray, '/voltage_command', lambda _, info: self.commanded_us.append(
+                1e-3 * info['source_timestamp'] + self.nt_minus_wall_us), COMMANDS)
 
     def _keep_timed(self, message, info) -> None:
         heard = time.time()
@@ -373,7 +379,18 @@ def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
         print(f"  {m['name']}: move {m['move_s']:.2f} s, held speed {m['speed']:.3f}, "
               f"swing {np.degrees(m['swing']):.2f} deg, applied V range "
               f"{np.round(m['volts_ptp'], 2)}", file=sys.stderr)
-    transit_out = [1e-3 * (arrived - sent) for arrived, sent in robot.arrivals[arrivals_from:]]
+    arrivals = robot.arrivals[arrivals_from:]
+    transit_out = [1e-3 * (arrived - sent) for arrived, sent in arrivals]
+    # The leg before: the controller's publish to the bridge setting it on NT (the latest
+    # command published before each one set; 0.5 ms of slack for the clocks' reading).
+    published = np.sort(copro.commanded_us)
+    before = np.searchsorted(published, [sent + 500.0 for _, sent in arrivals]) - 1
+    to_bridge = [1e-3 * (sent - published[i]) for (_, sent), i in zip(arrivals, before)
+                 if i >= 0]
+    print(f'phase {phase_ms} {load}: commands controller -> bridge set '
+          f'{percentiles(to_bridge)} max {max(to_bridge, default=0):.1f}, bridge set -> '
+          f'robot {percentiles(transit_out)} max {max(transit_out, default=0):.1f}',
+          file=sys.stderr)
     # A profile taken at a loop more than half a period after its setpoint 0's instant came
     # too late for it (the loop plays the setpoint nearest its instant).
     taken = robot.taken[taken_from:]
