@@ -11,6 +11,8 @@ from contextlib import contextmanager
 import os
 from typing import Optional
 
+# Fast DDS names its threads 'dds.<role>...': 'dds.udp.<port>' receives, 'dds.ev.<n>' times.
+DDS_THREAD_PREFIX = 'dds.'
 HOW_TO_ALLOW = ('allow it with an rtprio limit (limits.conf: "<user> - rtprio 98") or '
                 'CAP_SYS_NICE; running at normal priority, so CPU load can delay the beat')
 
@@ -54,6 +56,37 @@ def raise_process(priority: int) -> Optional[str]:
         for thread_id in os.listdir('/proc/self/task'):
             try:
                 _set_fifo(int(thread_id), priority)
+            except ProcessLookupError:      # a thread that ended meanwhile
+                pass
+    except OSError as error:
+        return f'real-time priority {priority} refused ({error.strerror}): {HOW_TO_ALLOW}'
+    return None
+
+
+def dds_threads(task_dir: str = '/proc/self/task') -> list[int]:
+    """The ids of this process's DDS threads (by their names), as they are now."""
+    found = []
+    for thread_id in os.listdir(task_dir):
+        try:
+            with open(os.path.join(task_dir, thread_id, 'comm')) as comm:
+                if comm.read().startswith(DDS_THREAD_PREFIX):
+                    found.append(int(thread_id))
+        except OSError:                     # a thread that ended meanwhile
+            pass
+    return found
+
+
+def raise_dds_threads(priority: int, task_dir: str = '/proc/self/task') -> Optional[str]:
+    """SCHED_FIFO at ``priority`` for the DDS threads the process has now, Python's own left
+    as they are: a message is received by a DDS thread before an executor takes it, and at
+    normal priority that thread waits in the run queue behind every busy process first.
+    None, or why it could not be done."""
+    if priority <= 0:
+        return None
+    try:
+        for thread_id in dds_threads(task_dir):
+            try:
+                _set_fifo(thread_id, priority)
             except ProcessLookupError:      # a thread that ended meanwhile
                 pass
     except OSError as error:

@@ -40,24 +40,32 @@ import time
 HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent / 'test'), str(HERE.parent), str(HERE)]
 
+from frc_loop_measures import (bridge_reading_ages, controller_hearing,  # noqa: E402
+                               mixed_readings, others_realtime_cores, others_realtime_ticks,
+                               percentiles, robot_stalls, stamp_s, transit_segments)
 from geometry_msgs.msg import PointStamped  # noqa: E402
 import numpy as np  # noqa: E402
 from sensor_msgs.msg import BatteryState, JointState  # noqa: E402
-from std_msgs.msg import String  # noqa: E402
+from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 
 from arm_control import config  # noqa: E402
-from arm_control.frc.conversions import joint_effort_nm  # noqa: E402
+from arm_control.frc.codec import ProfileCommand  # noqa: E402
 from arm_control.frc.robot_sim import RobotStandIn  # noqa: E402
 from arm_control.frc.settings import load_robot_sim  # noqa: E402
 from arm_control.frc.tables import free_port, now_us  # noqa: E402
 from arm_control.model.dynamics import ArmDynamics  # noqa: E402
 from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED  # noqa: E402
-from arm_control.realtime import raise_process  # noqa: E402
+from arm_control.realtime import raise_dds_threads, raise_process  # noqa: E402
 
 GOALS = ('mid_score', 'high_score', 'back_score')
 HOLD_S, HOLD_SPEED_RAD_S, HOLD_SWING_RAD = 2.0, 0.1, np.radians(0.5)
 REACH_TIMEOUT_S = 20.0
 PROBE_PRIORITY = 30                 # SCHED_FIFO of the probe's threads (the robot's: 50)
+PROBE_DDS_PRIORITY = 1              # ... of its DDS threads: the controller's for its own
+# Python hands its lock to a waiting thread after this long: the robot's NT threads time a
+# command's arrival in this process and wait for the lock behind the probe or the robot's loop
+# (Python's default, 5 ms, is the size of the commands' bar; a robot in Java or C++ has none).
+SWITCH_INTERVAL_S = 0.0005
 
 
 class Robot:
@@ -71,6 +79,15 @@ class Robot:
         self.truth = []                 # (t_s, [q, q, qd, qd])
         self.arrivals = []              # (reached the robot µs, set by the bridge µs)
         self.stand_in.observer = self.observe
+        self.taken = []                 # (loop instant s, the profile's setpoint-0 instant s)
+        take = self.stand_in.arrived
+
+        def arrived(now_s):
+            commands = take(now_s)
+            self.taken += [(now_s, c.time_us * 1e-6) for c in commands
+                           if isinstance(c, ProfileCommand)]
+            return commands
+        self.stand_in.arrived = arrived
         import ntcore
         tables = self.stand_in.tables
         self.listener = tables.instance.addListener(
@@ -103,6 +120,12 @@ class Coprocessor:
     def __init__(self, domain: int, port: int, log_dir: Path):
         from ros_harness import NodeProcess, Probe
         self.probe = Probe(domain, 'bench_frc_loop')
+        # Its DDS threads (they receive what it hears) at the controller's priority for its
+        # own: at normal priority under load they wait in the run queue, and the transit
+        # measured would be theirs, not the bridge's.
+        self.priority_problem = raise_dds_threads(PROBE_DDS_PRIORITY)
+        if self.priority_problem:
+            print(self.priority_problem)
         self.nodes = [NodeProcess('frc_bridge', domain, ['-p', f'nt_port:={port}'], log_dir),
                       NodeProcess('planner', domain, (), log_dir),
                       NodeProcess('controller', domain, (), log_dir)]
@@ -110,8 +133,10 @@ class Coprocessor:
         self.heard = {name: [] for name in ('joint_states', 'battery', 'events', 'states',
                                             'controller_events', 'diagnostics')}
         from diagnostic_msgs.msg import DiagnosticArray
+        # joint_states with DDS's times: (heard, message, published by the bridge, received).
+        self.joint_states = []
+        node.create_subscription(JointState, '/joint_states', self._keep_timed, 50)
         for name, msg_type, topic, qos in (
-                ('joint_states', JointState, '/joint_states', 50),
                 ('battery', BatteryState, '/battery_state', 50),
                 ('events', String, '/frc_bridge/events', 100),
                 ('states', String, '/arm_state', LATCHED),
@@ -119,6 +144,19 @@ class Coprocessor:
                 ('diagnostics', DiagnosticArray, '/diagnostics', 50)):
             node.create_subscription(msg_type, topic, self._keep(self.heard[name]), qos)
         self.goal_pub = node.create_publisher(PointStamped, '/goal_point', COMMANDS)
+        # When the controller published each command (DDS's source time, on NT's clock).
+        self.nt_minus_wall_us = now_us() - time.time() * 1e6
+        self.commanded_us = []
+        node.create_subscription(
+            Float64MultiArray, '/voltage_command', lambda _, info: self.commanded_us.append(
+                1e-3 * info['source_timestamp'] + self.nt_minus_wall_us), COMMANDS)
+
+    def _keep_timed(self, message, info) -> None:
+        heard = time.time()
+        self.heard['joint_states'].append((heard, message))
+        self.joint_states.append((heard, stamp_s(message.header),
+                                  1e-9 * info['source_timestamp'],
+                                  1e-9 * info['received_timestamp']))
 
     @staticmethod
     def _keep(into):
@@ -154,58 +192,15 @@ def goal(copro, robot, name, x, y) -> dict:
         lambda: copro.said('controller_events', 'reached', since), REACH_TIMEOUT_S))
     move_s = (copro.said('controller_events', 'reached', since) or [np.nan])[0] - since
     copro.probe.spin_for(HOLD_S + 0.1)
-    held = np.array([s for t, s in robot.truth if t > time.time() - HOLD_S])
+    from_s = time.time() - HOLD_S
+    held = np.array([s for t, s in robot.truth if t > from_s])
     speed = np.max(np.abs(held[:, 2:])) if len(held) else np.inf
     swing = np.max(np.ptp(held[:, :2], axis=0)) if len(held) else np.inf
-    return {'reached': reached, 'move_s': move_s, 'speed': speed, 'swing': swing,
-            'held': reached and speed < HOLD_SPEED_RAD_S and swing < HOLD_SWING_RAD}
-
-
-def mixed_readings(copro, robot, since_s) -> tuple[int, int, float]:
-    """(messages whose fields are not all those of the loop at their stamp, messages
-    checked, the largest stamp error in ms): each message is matched to the loop nearest
-    its stamp (the loops are a period apart)."""
-    times = np.array(sorted(robot.published))
-    mixed = checked = 0
-    worst_us = 0.0
-    for kind in ('joint_states', 'battery'):
-        for t, message in copro.heard[kind]:
-            if t < since_s or not len(times):
-                continue
-            stamp_us = message.header.stamp.sec * 1e6 + message.header.stamp.nanosec * 1e-3
-            error_us = np.abs(times - stamp_us)
-            worst_us = max(worst_us, np.min(error_us))
-            # A late loop may be followed closely by the next: every loop within 3 ms.
-            candidates = times[error_us <= max(3000.0, np.min(error_us))]
-            checked += 1
-            mixed += not any(whole(message, kind, robot.published[int(t)], robot.dynamics)
-                             for t in candidates)
-    return mixed, checked, 1e-3 * worst_us
-
-
-def whole(message, kind, r, dynamics) -> bool:
-    """Every field of ``message`` is reading ``r``'s."""
-    if kind == 'joint_states':
-        effort = joint_effort_nm(r.motor_current_a, dynamics)
-        return tuple(message.position) == r.position_rad and \
-            tuple(message.velocity) == r.velocity_rad_s and \
-            np.allclose(message.effort, effort, rtol=1e-12, atol=1e-9)
-    return message.voltage == np.float32(r.bus_voltage_v) and \
-        message.current == np.float32(-r.supply_current_a)       # float32 fields
-
-
-def bridge_reading_ages(copro, since_s) -> tuple[float, float]:
-    """From the bridge's own /diagnostics (the robot's sensors' instant to the bridge taking
-    the reading): the median of its per-second p50 (ms), and the share older than 10 ms."""
-    p50, older, total = [], 0, 0
-    for t, message in copro.heard['diagnostics']:
-        for status in message.status if t >= since_s else ():
-            values = {v.key: v.value for v in status.values}
-            if 'reading age p50 (ms, last s)' in values:
-                p50.append(float(values['reading age p50 (ms, last s)']))
-                older += int(values['readings older than 10 ms (last s)'])
-                total += int(values['readings (last s)'])
-    return (np.median(p50) if p50 else np.nan), 100.0 * older / max(total, 1)
+    volts = np.array([r.applied_voltage_v for us, r in list(robot.published.items())
+                      if us * 1e-6 > from_s]).reshape(-1, 2)
+    return {'name': name, 'reached': reached, 'move_s': move_s, 'speed': speed,
+            'swing': swing, 'held': reached and speed < HOLD_SPEED_RAD_S and
+            swing < HOLD_SWING_RAD, 'volts_ptp': np.ptp(volts, axis=0) if len(volts) else ()}
 
 
 def disable(copro, robot) -> tuple[float, float]:
@@ -239,66 +234,93 @@ def drop(copro, robot) -> tuple[float, float, tuple]:
     return 1e3 * lost, 1e3 * back, (since, time.time())
 
 
-def robot_stalls(robot, since_s) -> list:
-    """(from, to) wall seconds of every gap over 0.1 s between the robot's own loops."""
-    times = np.array(sorted(us * 1e-6 for us in list(robot.published) if us * 1e-6 >= since_s))
-    gaps = np.flatnonzero(np.diff(times) > 0.1)
-    return [(times[i], times[i + 1]) for i in gaps]
-
-
-def percentiles(values_ms) -> str:
-    values_ms = np.asarray(values_ms)
-    if not len(values_ms):
-        return '- / -'
-    return f'{np.median(values_ms):.1f} / {np.percentile(values_ms, 99):.1f}'
-
-
 def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
     """One row: at ``phase_ms``, or (``reference``) with commands applied on arrival."""
     robot.stand_in.phase_s = phase_ms * 1e-3
     robot.stand_in.apply_on_arrival(reference)
     copro.probe.spin_for(1.0)
     since = time.time()
-    arrivals_from = len(robot.arrivals)
+    others_from = others_realtime_ticks()
+    arrivals_from, taken_from = len(robot.arrivals), len(robot.taken)
     moves = [goal(copro, robot, name, *presets[name]) for name in GOALS]
     mixed, checked, stamp_error_ms = mixed_readings(copro, robot, since)
     bridge_p50, bridge_over = bridge_reading_ages(copro, since)
-    transit_in = [1e3 * (t - (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec))
-                  for t, m in copro.heard['joint_states'] if t >= since]
-    transit_out = [1e-3 * (arrived - sent) for arrived, sent in robot.arrivals[arrivals_from:]]
+    legs = transit_segments(copro, since)
+    transit_in = legs['total']
+    legs_p99 = ' / '.join(f'{np.percentile(legs[leg], 99):.1f}' if len(legs[leg]) else '-'
+                          for leg in ('bridge', 'dds', 'probe'))
+    print(f'phase {phase_ms} {load}: ' + ', '.join(
+        f'{leg} {percentiles(ms)} max {np.max(ms, initial=0):.1f}' for leg, ms in legs.items()),
+        file=sys.stderr)
+    for m in moves:
+        print(f"  {m['name']}: move {m['move_s']:.2f} s, held speed {m['speed']:.3f}, "
+              f"swing {np.degrees(m['swing']):.2f} deg, applied V range "
+              f"{np.round(m['volts_ptp'], 2)}", file=sys.stderr)
+    arrivals = robot.arrivals[arrivals_from:]
+    transit_out = [1e-3 * (arrived - sent) for arrived, sent in arrivals]
+    # The leg before: the controller's publish to the bridge setting it on NT (the latest
+    # command published before each one set; 0.5 ms of slack for the clocks' reading).
+    published = np.sort(copro.commanded_us)
+    before = np.searchsorted(published, [sent + 500.0 for _, sent in arrivals]) - 1
+    to_bridge = [1e-3 * (sent - published[i]) for (_, sent), i in zip(arrivals, before)
+                 if i >= 0]
+    print(f'phase {phase_ms} {load}: commands controller -> bridge set '
+          f'{percentiles(to_bridge)} max {max(to_bridge, default=0):.1f}, bridge set -> '
+          f'robot {percentiles(transit_out)} max {max(transit_out, default=0):.1f}',
+          file=sys.stderr)
+    # A profile taken at a loop more than half a period after its setpoint 0's instant came
+    # too late for it (the loop plays the setpoint nearest its instant).
+    taken = robot.taken[taken_from:]
+    period_s = 1.0 / robot.stand_in.robot.loop_rate_hz
+    late = sum(loop_s > start_s + 0.5 * period_s for loop_s, start_s in taken)
+    late_text = '-' if reference else f'{late}/{len(taken)}'     # on arrival: not queued
+    goals_until = time.time()
+    others_cores = others_realtime_cores(others_from, others_realtime_ticks(),
+                                         goals_until - since)
     to_zero_ms, to_disabled_ms = disable(copro, robot)
     lost_ms, back_ms, window = drop(copro, robot)
     stalls = robot_stalls(robot, since)
+    controller_age_ms, controller_lost = controller_hearing(copro, since, goals_until, window)
     false_lost = [(t, m.data) for t, m in copro.heard['events'] if t >= since and
                   'lost the robot' in m.data and not window[0] <= t <= window[1] and
                   not any(a <= t <= b + 0.3 for a, b in stalls)]
+    loops = np.array(sorted(us * 1e-6 for us in list(robot.published)))
     for t, said in false_lost:
-        print(f'false lost at {t - since:.2f} s: {said}', file=sys.stderr)
+        before = loops[(loops > t - 0.3) & (loops <= t)]
+        gap_ms = 1e3 * np.max(np.diff(before), initial=0.0)
+        print(f"false lost at {t - since:.2f} s: {said}; the robot loop's longest gap in the "
+              f'0.3 s before: {gap_ms:.0f} ms', file=sys.stderr)
     false_lost = len(false_lost)
     held = sum(m['held'] for m in moves)
     robot.stand_in.apply_on_arrival(False)
     phase = 'on arrival (reference)' if reference else f'{phase_ms:g}'
-    return (f'| {load} | {phase} | {held}/{len(moves)} | '
+    return (f'| {load} | {others_cores:.2f} | {phase} | {held}/{len(moves)} | '
             f"{max(m['move_s'] for m in moves):.2f} | {max(m['speed'] for m in moves):.3f} | "
             f"{np.degrees(max(m['swing'] for m in moves)):.2f} | {mixed}/{checked} | "
             f'{stamp_error_ms:.2f} | {bridge_p50:.1f} / {bridge_over:.1f} | '
-            f'{percentiles(transit_in)} | {percentiles(transit_out)} | {to_zero_ms:.0f} | '
+            f'{percentiles(transit_in)} | {legs_p99} | {controller_age_ms:.0f} | '
+            f'{controller_lost} | {percentiles(transit_out)} | '
+            f'{late_text} | {to_zero_ms:.0f} | '
             f'{to_disabled_ms:.0f} | {lost_ms:.0f} | {back_ms:.0f} | {false_lost} | '
             f'{len(stalls)} |')
 
 
-HEADER = ('| load | phase ms | goals reached & held | slowest move s | hold: fastest joint '
-          'rad/s | hold: swing deg | mixed readings | stamp error ms | reading → bridge '
-          'p50 ms / % over 10 ms | reading → joint_states heard p50 / p99 ms | '
-          'command → robot p50 / p99 ms | disabled → 0 V ms | disabled → arm_state ms | '
+HEADER = ("| load | others' real-time threads, cores | phase ms | goals reached & held | "
+          'slowest move s | hold: fastest joint rad/s | hold: swing deg | mixed readings | '
+          'stamp error ms | reading → bridge p50 ms / % over 10 ms | reading → joint_states '
+          'heard p50 / p99 ms | its p99 legs: bridge / DDS / probe ms | controller: oldest '
+          'joint_states ms | controller: sensors lost | '
+          'command → robot p50 / p99 ms | profiles taken after their instant | '
+          'disabled → 0 V ms | disabled → arm_state ms | '
           'drop → lost ms | served → back ms | false lost | robot stalls > 0.1 s |\n'
-          '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+          '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|'
+          '---|')
 
 
-def set_priority(priority: int) -> None:
-    """This thread at SCHED_FIFO ``priority``, or normal scheduling for 0 (what it starts
-    inherits it)."""
-    os.sched_setscheduler(0, os.SCHED_FIFO if priority else os.SCHED_OTHER,
+def set_priority(priority: int, thread_id: int = 0) -> None:
+    """A thread (0: this one) at SCHED_FIFO ``priority``, or normal scheduling for 0 (what
+    it starts inherits it)."""
+    os.sched_setscheduler(thread_id, os.SCHED_FIFO if priority else os.SCHED_OTHER,
                           os.sched_param(priority))
 
 
@@ -313,6 +335,7 @@ def main() -> None:
     args = parser.parse_args()
     import busy
     from ros_harness import ros_domain
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     presets = {name: (x, y) for name, x, y in config.load('sim')[0].presets}
     rows = []
     port = free_port()

@@ -6,6 +6,7 @@ which the controller never sees.
 
 import dataclasses
 import math
+import os
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, TwistStamped
@@ -18,6 +19,7 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
 from arm_control import config, parameters
+from arm_control import realtime
 from arm_control.control.events import parse_event
 from arm_control.control.goals import GoalValidator
 from arm_control.control.plan_caches import preset_pairs
@@ -328,3 +330,32 @@ def test_live_tuning_takes_good_values_and_refuses_bad_ones(launch, probe):
     probe.spin_for(0.3)
     q, qd, xy = tool_track(config.load('sim')[0], truth)
     assert np.linalg.norm(xy[-1] - (0.6, 1.6)) < 0.031
+
+
+def test_the_controller_receives_at_its_executor_s_priority(launch, probe):
+    """A reading must not wait behind busy processes before the executor takes it: the
+    controller's DDS threads (Fast DDS's ``dds.*``, which receive) are SCHED_FIFO at the
+    executor's priority, below its loop; where the system refuses, the node says how to
+    allow it."""
+    from arm_control.nodes.controller import EXECUTOR_PRIORITY
+    controller = launch('controller')
+    tasks = f'/proc/{controller.process.pid}/task'
+
+    def dds_policies():
+        found = set()
+        for thread_id in realtime.dds_threads(tasks):
+            try:
+                found.add((os.sched_getscheduler(thread_id),
+                           os.sched_getparam(thread_id).sched_priority))
+            except ProcessLookupError:                      # a thread that ended meanwhile
+                pass
+        return found
+    fifo = {(os.SCHED_FIFO, EXECUTOR_PRIORITY)}
+
+    def refused():                  # the loop's priority refused: the executor's is too
+        return 'refused' in controller.output()
+    assert probe.spin_until(lambda: dds_policies() == fifo or refused(), 30.0), dds_policies()
+    if refused():
+        assert 'rtprio' in controller.output()              # how to allow it
+    else:
+        assert dds_policies() == fifo

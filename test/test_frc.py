@@ -5,6 +5,8 @@ import json
 import math
 from pathlib import Path
 import re
+import shutil
+import subprocess
 import time
 
 import ntcore
@@ -77,6 +79,17 @@ def test_the_java_robot_example_names_every_topic_the_robot_uses():
     assert f'PROFILE_HEAD = {contract.PROFILE_HEAD_SIZE}, PROFILE_POINT = ' \
         f'{contract.PROFILE_POINT_SIZE};' in example
     assert 'nt.flush();' in example and 'getFPGATime()' in example
+
+
+@pytest.mark.skipif(shutil.which('javac') is None, reason='no javac here')
+def test_the_java_robot_example_is_java(tmp_path):
+    """javac parses docs/frc_robot/Robot.java (its syntax only: WPILib is not here to
+    compile it against)."""
+    parse_only = ['-XDshould-stop.ifError=PARSE', '-XDshould-stop.ifNoError=PARSE']
+    result = subprocess.run(['javac', '-d', str(tmp_path), *parse_only,
+                             str(ROOT / 'docs' / 'frc_robot' / 'Robot.java')],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
 
 
 def test_each_topic_once_and_each_side_in_its_own_table():

@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from arm_control.realtime import raised
+from arm_control.realtime import dds_threads, raise_dds_threads, raised
 
 
 def in_a_thread(work):
@@ -57,3 +57,48 @@ def test_priority_zero_leaves_the_thread_alone():
         with raised(0) as problem:
             return problem, policy()
     assert in_a_thread(work) == (None, os.SCHED_OTHER)
+
+
+def test_the_dds_threads_are_raised_and_python_s_are_left_alone():
+    """A thread named as Fast DDS names its own (``dds.udp.<port>``) goes to SCHED_FIFO; this
+    process's other threads stay as they were."""
+    named, done = threading.Event(), threading.Event()
+    ids = {}
+
+    def dds_like():
+        ids['dds'] = threading.get_native_id()
+        with open(f"/proc/self/task/{ids['dds']}/comm", 'w') as comm:
+            comm.write('dds.udp.7400')
+        named.set()
+        done.wait(10.0)
+
+    def other():
+        ids['other'] = threading.get_native_id()
+        done.wait(10.0)
+    threads = [threading.Thread(target=dds_like), threading.Thread(target=other)]
+    for thread in threads:
+        thread.start()
+    try:
+        assert named.wait(10.0)
+        assert ids['dds'] in dds_threads() and ids['other'] not in dds_threads()
+        problem = raise_dds_threads(7)
+        if problem is None:
+            assert os.sched_getscheduler(ids['dds']) == os.SCHED_FIFO
+            assert os.sched_getparam(ids['dds']).sched_priority == 7
+        else:                                   # no rtprio limit nor CAP_SYS_NICE here
+            assert 'rtprio' in problem
+        assert os.sched_getscheduler(ids['other']) == os.SCHED_OTHER
+        assert policy() == os.SCHED_OTHER
+    finally:
+        done.set()
+        for thread in threads:
+            thread.join(10.0)
+
+
+def test_raising_no_dds_threads_at_priority_zero_does_nothing(tmp_path):
+    (tmp_path / '12').mkdir()
+    (tmp_path / '12' / 'comm').write_text('dds.ev.0\n')
+    (tmp_path / '13').mkdir()
+    (tmp_path / '13' / 'comm').write_text('python\n')
+    assert dds_threads(str(tmp_path)) == [12]
+    assert raise_dds_threads(0, str(tmp_path)) is None

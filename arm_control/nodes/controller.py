@@ -144,6 +144,7 @@ class ControllerNode(Node):
         self.loop.start()
         if priority:         # this thread spins the executor (where refused, the loop said so)
             realtime.raise_this_thread(EXECUTOR_PRIORITY)
+            realtime.raise_dds_threads(EXECUTOR_PRIORITY)   # which receive what it takes
         self.get_logger().info(f'controlling the arm at {self.config.loop_rate_hz:g} Hz'
                                f'{f" at real-time priority {priority}" if priority else ""}; '
                                'waiting for joint_states')
