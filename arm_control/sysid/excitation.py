@@ -192,9 +192,10 @@ def design_excitation(arm: ArmConfig, settings: SysIdConfig, start_rad=None,
     ``kinds`` picks the parts, in this order: each joint's quasistatic sweeps, the coupled
     multi-sine, each joint's fast sweeps, each joint's dynamic steps. Returns
     ``(Excitation, notes)``; with ``start_rad`` (where the arm is) it begins with a gentle
-    move from there to the centre, checked free of forbidden space (no margin: the arm may rest near it). Raises
-    ValueError if the centre or that move is unsafe, or if no part can be made safe.
-    The feedforward may need ``current_share`` of ``max_current_a`` (default: stage 1's).
+    move from there to the centre, checked free of forbidden space (no margin: the arm may
+    rest near it). Raises ValueError if the centre or that move is unsafe, or if no part can
+    be made safe. The feedforward may need ``current_share`` of ``max_current_a`` (default:
+    stage 1's).
     """
     if current_share is None:
         current_share = settings.stage_one_current_share
