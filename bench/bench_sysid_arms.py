@@ -50,6 +50,18 @@ def window_p95(model, traces):
     return float(np.percentile(errors, 95))
 
 
+def identify(truth, default, settings, run):
+    """Run ``run`` of the bench (its multi-sine phases and sensor noise) on the true arm, as
+    the node drives it, fitted and realised as the file would be: (identified arm, fit,
+    quality, simulated run)."""
+    simulated = identification_run(
+        truth, default, dataclasses.replace(settings, random_seed=run), seed=200 + run)
+    fit = fit_log(simulated.log, default, settings.smoothing_window_s,
+                  settings.max_command_lag_s, settings.min_speed_rad_s)
+    realisation, quality = identified_values(fit, default)
+    return with_values(default, realisation.values), fit, quality, simulated
+
+
 def one_arm(path, default, settings, runs, lines):
     truth = config.ArmConfig.from_parameters(layered(CONFIG / 'arm.yaml', path))
     controller_config = config.load('controller')[1]
@@ -58,12 +70,7 @@ def one_arm(path, default, settings, runs, lines):
     true_p95, default_p95 = window_p95(truth, traces), window_p95(default, traces)
     fits, p95s, refused, times = [], [], [], []
     for run in range(runs):
-        simulated = identification_run(
-            truth, default, dataclasses.replace(settings, random_seed=run), seed=200 + run)
-        fit = fit_log(simulated.log, default, settings.smoothing_window_s,
-                      settings.max_command_lag_s, settings.min_speed_rad_s)
-        realisation, quality = identified_values(fit, default)
-        identified = with_values(default, realisation.values)
+        identified, fit, quality, simulated = identify(truth, default, settings, run)
         fits.append(fit)
         refused.append(quality.unidentified)
         times.append(simulated.arm_time_s)

@@ -3,9 +3,12 @@
 As WPILib's SysId does per mechanism, each joint in turn makes quasistatic sweeps (its speed
 ramped slowly up and down, so gravity and friction dominate: p1, p2, b, c) and dynamic steps
 (fast rest-to-rest moves: the inertias α, γ); both joints also move together in a multi-sine
-(the coupling and Coriolis terms, and every parameter at once). All of it moves about a
-centre configuration and returns there between parts. (``session`` runs the sweeps and the
-multi-sine first, and designs the steps with what they taught.)
+(the coupling and Coriolis terms, and every parameter at once), and each joint sweeps its
+range again with its speed ramped fast, to about 2 rad/s (viscous friction b·θ̇ grows with
+the speed and Coulomb friction does not: at the slow sweeps' speeds the two trade against
+each other). All of it moves about a centre configuration and returns there between parts.
+(``session`` runs the slow sweeps and the multi-sine first, and designs the fast sweeps and
+the steps with what they taught.)
 
 Before anything is driven, ``design_excitation`` samples every part every 5 ms and checks it
 with the model it is given: clear of forbidden space by ``margin_rad`` on both joints, and
@@ -144,8 +147,7 @@ def check_segments(segments, arm: ArmConfig, settings: SysIdConfig,
     return None
 
 
-def _sweeps(centre, joint, reach, settings):
-    a = settings.quasistatic_acceleration_rad_s2
+def _sweeps(centre, joint, reach, a):
     out = Sweep(centre, joint, reach, a)
     across = Sweep(out.end_rad, joint, -2.0 * reach, a)
     back = Sweep(across.end_rad, joint, reach, a)
@@ -180,19 +182,20 @@ def _multisine(centre, settings, scale):
             Hold(centre, PAUSE_S))
 
 
-QUASISTATIC, MULTISINE, DYNAMIC = 'quasistatic', 'multi-sine', 'dynamic'
+QUASISTATIC, MULTISINE, FAST, DYNAMIC = 'quasistatic', 'multi-sine', 'fast sweeps', 'dynamic'
 
 
 def design_excitation(arm: ArmConfig, settings: SysIdConfig, start_rad=None,
-                      kinds=(QUASISTATIC, MULTISINE, DYNAMIC), current_share=None):
+                      kinds=(QUASISTATIC, MULTISINE, FAST, DYNAMIC), current_share=None):
     """The excitation about ``settings.centre_rad``, every part checked and shrunk until safe.
 
     ``kinds`` picks the parts, in this order: each joint's quasistatic sweeps, the coupled
-    multi-sine, each joint's dynamic steps. Returns ``(Excitation, notes)``; with
-    ``start_rad`` (where the arm is) it begins with a gentle move from there to the centre,
-    checked free of forbidden space (no margin: the arm may rest near it). Raises
-    ValueError if the centre or that move is unsafe, or if no part can be made safe.
-    The feedforward may need ``current_share`` of ``max_current_a`` (default: stage 1's).
+    multi-sine, each joint's fast sweeps, each joint's dynamic steps. Returns
+    ``(Excitation, notes)``; with ``start_rad`` (where the arm is) it begins with a gentle
+    move from there to the centre, checked free of forbidden space (no margin: the arm may
+    rest near it). Raises ValueError if the centre or that move is unsafe, or if no part can
+    be made safe. The feedforward may need ``current_share`` of ``max_current_a`` (default:
+    stage 1's).
     """
     if current_share is None:
         current_share = settings.stage_one_current_share
@@ -222,10 +225,17 @@ def design_excitation(arm: ArmConfig, settings: SysIdConfig, start_rad=None,
         reach = settings.quasistatic_range_rad[joint]
         if QUASISTATIC in kinds and reach > 0.0:
             builders.append((f'{name} {QUASISTATIC}',
-                             lambda s, j=joint, r=reach: _sweeps(centre, j, r * s, settings)))
+                             lambda s, j=joint, r=reach: _sweeps(
+                                 centre, j, r * s, settings.quasistatic_acceleration_rad_s2)))
     if (MULTISINE in kinds and settings.multisine_time_s > 0.0
             and max(settings.multisine_amplitude_rad) > 0.0):
         builders.append((f'coupled {MULTISINE}', lambda s: _multisine(centre, settings, s)))
+    for joint, name in enumerate(('shoulder', 'elbow')):
+        reach = settings.quasistatic_range_rad[joint]
+        fast = settings.fast_sweep_acceleration_rad_s2
+        if FAST in kinds and reach > 0.0 and fast > 0.0:
+            builders.append((f'{name} {FAST}', lambda s, j=joint, r=reach, a=fast: _sweeps(
+                centre, j, r * math.sqrt(s), a * s)))
     for joint, name in enumerate(('shoulder', 'elbow')):
         reach = settings.dynamic_step_rad[joint]
         if DYNAMIC in kinds and reach > 0.0:

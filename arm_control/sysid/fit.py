@@ -6,10 +6,14 @@ sampled data: the second difference of θ is the mean of θ̈ under a hat of ±1
 central difference the mean of θ̇, and the mean of the two periods' voltages the mean of V
 (commands held, zero-order, from ``lag`` after they were sent; clipped to the battery
 voltage where that was logged). The inertia terms take that acceleration with M(θ) at the
-sample; gravity, Coriolis and Coulomb terms the Savitzky-Golay-smoothed θ and θ̇; the
-viscous term the central difference, as the back-EMF does. Then every term is smoothed by
-the same Hann window of ``smoothing_window_s``, so both sides of the equation see the same
-band and the 50 Hz zero-order hold biases nothing.
+Savitzky-Golay-smoothed θ (the raw θ's noise in cos θb would multiply its own in the second
+difference: E[n_i·(n_{i+1} − 2n_i + n_{i−1})] = −2σ²); gravity, Coriolis and Coulomb terms
+the raw θ at the sample (its noise enters cos θ only at second order, and a smoothed θ is
+a distorted one, the more so the longer the window, which gravity's large torque turns
+into bias) and the smoothed θ̇ (a quintic: less distortion of the fast steps); the viscous
+term the central difference, as the back-EMF does. Then every term is smoothed by the same
+Hann window of ``smoothing_window_s``, so both sides of the equation see the same band and
+the 50 Hz zero-order hold biases nothing.
 
 The fit (``fit_log``). Each sample gives two rows, shoulder and elbow, weighted by 1/σ of
 their joint's residual (two passes). The arm ran in closed loop, so the command carries the
@@ -43,7 +47,7 @@ from arm_control.model.dynamics import ArmDynamics
 from arm_control.sysid.log import Log
 from arm_control.sysid.regressor import base_parameters, PARAMETER_COUNT, regressor
 
-POLYORDER = 3
+POLYORDER = 5              # the Savitzky-Golay polynomial of the smoothed θ and θ̇
 GAP_PERIODS = 2.5          # a step longer than this many sample periods splits the log
 LAG_STEPS = 17             # lags tried across ±max_command_lag_s
 MIN_SAMPLES = 50
@@ -54,7 +58,7 @@ PARAMETER_JOINT = (0, 1, 0, 1, 0, 0, 1, 1)  # the joint whose torque each parame
 
 
 def window_samples(window_s: float, period_s: float) -> int:
-    """The filter's length in samples: odd, and long enough for a cubic."""
+    """The filter's length in samples: odd, and long enough for the polynomial."""
     window = max(POLYORDER + 3, int(round(window_s / period_s)))
     return window + 1 if window % 2 == 0 else window
 
@@ -143,9 +147,10 @@ def filter_log(time_s, position, arm: ArmConfig, window_s: float) -> FilteredLog
     At each sample i the second difference is exact: (θ_{i+1} − 2θ_i + θ_{i−1})/T² is the
     mean of θ̈ under the hat Λ(s) = T − |s| (/T²), and so are the central difference of θ
     for ω and the mean of the two periods' voltages for V. The inertia terms take that
-    acceleration with M(θ_i) (M changes little in ±T); gravity, Coriolis and Coulomb terms
-    the Savitzky-Golay-smoothed θ and θ̇; the viscous term the central difference, as the
-    back-EMF does. Then every term is smoothed by the same g.
+    acceleration with M at the Savitzky-Golay-smoothed θ_i (M changes little in ±T);
+    gravity, Coriolis and Coulomb terms the raw θ_i and the smoothed θ̇ (whose kernel gives
+    θ_i no weight); the viscous term the central difference, as the back-EMF does. Then
+    every term is smoothed by the same g.
     """
     time_s, position = np.asarray(time_s, float), np.asarray(position, float)
     period = float(np.median(np.diff(time_s)))
@@ -167,7 +172,7 @@ def filter_log(time_s, position, arm: ArmConfig, window_s: float) -> FilteredLog
         acceleration = (q[2:] - 2.0 * q[1:-1] + q[:-2]) / period ** 2
         central = (q[2:] - q[:-2]) / (2.0 * period)
         q_i, zero = smooth[inner], np.zeros_like(acceleration)
-        rows = regressor(arm, q_i, speed[inner], zero)       # gravity, Coriolis, friction
+        rows = regressor(arm, q[inner], speed[inner], zero)     # gravity, Coriolis, friction
         for row, column in VISCOUS_COLUMNS:
             rows[:, row, column] = central[:, row]
         inertial = regressor(arm, q_i, zero, acceleration) - regressor(arm, q_i, zero, zero)

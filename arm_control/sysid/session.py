@@ -3,10 +3,10 @@
 Stage 1 moves from where the arm is to the centre, then makes each joint's quasistatic
 sweeps and the coupled multi-sine, designed and tracked with the robot file's model. What it
 logged is fitted (gravity and friction are well known by then, the inertias nearly), and
-stage 2 -- each joint's dynamic steps, the fastest part -- is designed (its current checked)
-and tracked with that model. So a robot file that is far off (the demo's forearm is half as
-heavy again as its file says, with twice the moment) neither overloads a motor nor loses
-track where it matters most. If the stage-1 fit fails, stage 2 uses the robot file.
+stage 2 -- each joint's fast sweeps and dynamic steps, the fastest parts -- is designed (its
+current checked) and tracked with that model. So a robot file that is far off (the demo's
+forearm is half as heavy again as its file says, with twice the moment) neither overloads a
+motor nor loses track where it matters most. If the stage-1 fit fails, stage 2 uses the robot file.
 
 ``Session`` is shared by the node (which fits between the stages on a worker thread while
 the arm is held at the centre) and the in-process run (``simulated``).
@@ -15,7 +15,7 @@ the arm is held at the centre) and the in-process run (``simulated``).
 from dataclasses import replace
 
 from arm_control.config import ArmConfig
-from arm_control.sysid.excitation import (design_excitation, DYNAMIC, ExcitationRun,
+from arm_control.sysid.excitation import (design_excitation, DYNAMIC, ExcitationRun, FAST,
                                           MULTISINE, QUASISTATIC)
 from arm_control.sysid.fit import fit_log
 from arm_control.sysid.handover import holding, lowering
@@ -80,7 +80,7 @@ class Session:
         self.notes.append(note)
         try:
             excitation, notes = design_excitation(
-                model, self.settings, kinds=(DYNAMIC,),
+                model, self.settings, kinds=(FAST, DYNAMIC),
                 current_share=self.settings.stage_two_current_share)
         except ValueError as error:
             self.notes.append(f'no dynamic steps: {error}')

@@ -21,6 +21,7 @@ class SysIdConfig:
     centre_rad: tuple[float, float]
     quasistatic_range_rad: tuple[float, float]
     quasistatic_acceleration_rad_s2: float
+    fast_sweep_acceleration_rad_s2: float
     dynamic_step_rad: tuple[float, float]
     dynamic_step_time_s: float
     multisine_amplitude_rad: tuple[float, float]
@@ -85,6 +86,7 @@ class SysIdConfig:
             centre_rad=read.numbers('centre_rad', 2),
             quasistatic_range_rad=nonnegative_pair('quasistatic_range_rad'),
             quasistatic_acceleration_rad_s2=read.positive('quasistatic_acceleration_rad_s2'),
+            fast_sweep_acceleration_rad_s2=read.nonnegative('fast_sweep_acceleration_rad_s2'),
             dynamic_step_rad=nonnegative_pair('dynamic_step_rad'),
             dynamic_step_time_s=read.positive('dynamic_step_time_s'),
             multisine_amplitude_rad=nonnegative_pair('multisine_amplitude_rad'),
