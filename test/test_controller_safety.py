@@ -120,9 +120,12 @@ def test_an_estop_by_service_brakes_to_rest_and_holds_the_arm_there(arm, control
 def test_an_estop_cuts_the_power_when_asked_to_and_the_arm_falls(arm, controller_config,
                                                                  planner, how):
     """0 V: at once with ``estop_holds_arm`` false, on a second e-stop, or when the joint
-    states stop while the arm is held. Nothing then holds it: it falls."""
+    states stop while the arm is held sending plain volts (sending profiles, the robot plays
+    the rest of the last one: test_lost_sensors.py). Nothing then holds it: it falls."""
     holds = how != 'estop_holds_arm false'
-    rig = estopped_mid_move(arm, controller_config, planner, estop_holds_arm=holds)
+    mode = 'volts' if how == 'sensors lost' else controller_config.command_mode
+    rig = estopped_mid_move(arm, controller_config, planner, estop_holds_arm=holds,
+                            command_mode=mode)
     if holds:
         rig.run(1.0)
         if how == 'e-stop again':

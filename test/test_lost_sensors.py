@@ -90,3 +90,22 @@ def test_the_rest_of_a_profile_plays_as_the_profile_would():
             whole.offer(profile)
             alone.offer(rest)
             assert alone.volts(t, q, qd) == pytest.approx(whole.volts(t, q, qd), abs=1e-9)
+
+
+def test_e_stopped_holding_then_sensors_lost_the_robot_holds_until_e_stopped_again(
+        arm, controller_config):
+    """E-stopped, the arm braked and held; the sensors lost: the robot plays the rest of the
+    last profile (0 V dropped it). An e-stop again is the user's 0 V."""
+    loop = RobotLoop(arm, _config(controller_config, 'profile'), start=(0.3, 1.2), seed=4)
+    loop.run(1.0)
+    loop.core.estop(loop.now_s)
+    loop.run(0.5)
+    held = np.array(loop.plant.state[:2])
+    began = loop.now_s
+    states, playing = _lose_sensors(loop, LOST_S)
+    assert states == {ArmState.ESTOPPED} and all(playing) and loop.core.held_by_robot
+    moved = max(np.max(np.abs(s[:2] - held)) for t, s in loop.history if t > began)
+    assert moved < math.radians(0.5)
+    loop.core.estop(loop.now_s)
+    _, playing = _lose_sensors(loop, 0.2)
+    assert not playing[-1]                                       # a plain pair: 0 V

@@ -86,6 +86,7 @@ class ArmController:
         self.left_times, self.reached_when_left = 0, 0    # motions left since a goal reached
         self.waited_on, self.waited_s = None, 0.0         # the motion that waited, how long
         self.estop_holding = False                        # e-stopped, holding (not at 0 V)
+        self.held_by_robot = False      # ... its sensors then lost: the robot plays the rest
         self.voltage = self.feedforward_v = self.feedback_v = np.zeros(2)
         self.saturated = (0, 0)
         self.setpoint = (np.zeros(2), np.zeros(2), np.zeros(2))
@@ -173,6 +174,9 @@ class ArmController:
         e-stopped again while held -- 0 V. ``cut_power``: control itself failed."""
         hold = self.config.estop_holds_arm and not cut_power and self.state in COMMANDING
         if self.state == S.ESTOPPED:
+            if not self.estop_holding and self.held_by_robot:   # the robot held it: 0 V
+                self.held_by_robot = False
+                return self._say(now_s, Kind.ESTOP, 'error', 'E-STOP again: 0 V until reset')
             if not self.estop_holding:
                 return True, 'already e-stopped: 0 V until reset'
         else:
@@ -187,7 +191,8 @@ class ArmController:
             self.pid.reset()
         self.estop_error = f'E-STOP: {reason}'
         action = ('braking to rest and holding there until reset (e-stop again: 0 V)' if hold
-                  else '0 V until reset')
+                  else 'the robot plays the rest of the last profile, held, until reset '
+                  '(e-stop again: 0 V)' if self.held_by_robot else '0 V until reset')
         kind = Kind.CONTROL_FAILED if cut_power else Kind.ESTOP
         return self._say(now_s, kind, 'error', f'E-STOP: {reason}; {action}')
 
@@ -203,6 +208,7 @@ class ArmController:
         previous, holding = self.state, self.estop_holding or self.state == S.ERROR
         self.machine.fire(T.RESET)
         self.estop_holding, self.estop_error, self.goals.last_error = False, '', ''
+        self.held_by_robot = False
         what = 'holding where it was held' if holding else self._resume(now_s)
         return self._say(now_s, Kind.RESET, 'info', f'reset from {previous}: {what}')
 
@@ -219,6 +225,7 @@ class ArmController:
             return False, f"cannot disable in state '{self.state}': reset first"
         self.goals.drop()
         self.machine.fire(T.DISABLE)
+        self.held_by_robot = False
         self.voltage = np.zeros(2)
         self.pid.reset()
         return self._say(now_s, Kind.DISABLED, 'info', 'disabled: 0 V, goals dropped')
@@ -348,6 +355,7 @@ class ArmController:
             self._say(now_s, Kind.SENSORS_LOST, 'error',
                       f'{self.goals.last_error}: {action} until they return')
         if not fresh and self.estop_holding:
+            self.held_by_robot = self.config.command_mode == 'profile'
             self.estop(now_s, f'no joint states for {age_s:.3f} s while holding', cut_power=True)
         if fresh and self.state == S.NO_SENSORS:
             held, self.held_when_lost = self.held_when_lost, None

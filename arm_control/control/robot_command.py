@@ -23,11 +23,11 @@ robot's instants (``TICK_AFTER_INSTANT_S``), and sends a profile
 - then a stop to rest along the path the arm is on (``Setpoints.stopping``), ending at rest
   with its holding volts: played to its end with nothing newer, a profile leaves the arm held.
 
-Its sensors lost (``no_sensors``), the controller cannot compute a newer profile, and 0 V
-would drop the arm: it sends what is left of its last one (``rest_of``) each period, which
-the robot plays as it would have (the stop, then the hold on its own readings). A plain 0 V
-pair stays the command when the power is cut on purpose (e-stop, disable) or nothing was
-sent before.
+Its sensors lost (``no_sensors``, or e-stopped holding: ``held_by_robot``), the controller
+cannot compute a newer profile, and 0 V would drop the arm: it sends what is left of its
+last one (``rest_of``) each period, which the robot plays as it would have (the stop, then
+the hold on its own readings). A plain 0 V pair stays the command when the power is cut on
+purpose (e-stop, e-stop again, disable) or nothing was sent before.
 """
 
 from collections import deque
@@ -133,7 +133,8 @@ class Commander:
         if self.profiles and not core.unpowered:
             self.last_profile = profile_ahead(core, acts_s, self.clock.period_s)
             return self.last_profile
-        if self.profiles and core.state == ArmState.NO_SENSORS and self.last_profile is not None:
+        lost = core.state == ArmState.NO_SENSORS or core.held_by_robot
+        if self.profiles and lost and self.last_profile is not None:
             self.last_profile = rest_of(self.last_profile, acts_s)
             return self.last_profile
         self.last_profile = None                    # a pair in charge: nothing left to hold

@@ -444,7 +444,7 @@ class ControllerNode(Node):
                 last = None                         # another controller has the arm
             elif not self.commander.profiles:
                 last = (0.0, 0.0)
-            elif last is not None and self.core.unpowered \
+            elif last is not None and self.core.unpowered and not self.core.held_by_robot \
                     and self.core.state != ArmState.NO_SENSORS:     # lost: its profile holds
                 last = (0.0, 0.0)
         if last is None:           # a profile controller that never commanded: leave the arm
