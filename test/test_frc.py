@@ -205,11 +205,13 @@ def test_the_link_goes_found_lost_back_with_one_event_each():
         assert link.check(1.0 + 0.02 * k, nt_connected=True) is None   # 0.08 s: not yet
     lost = link.check(1.12, nt_connected=True)
     assert lost.level == 'error' and 'no readings for 0.12 s (NT still connected)' in \
-        lost.message and '0 V' in lost.message
+        lost.message
     # Lost is not disabled: the controller stops as its joint states stop, and carries on
     # with its goals when they return.
     assert lost.controller_enabled is None
-    assert not link.may_command and link.outgoing((3.0, 4.0)) == rules.ZERO_V
+    # Lost, nothing is sent, not even 0 V: a link that only stalled would deliver it late
+    # and drop an arm the robot holds where its last profile ends.
+    assert not link.may_command and link.outgoing((3.0, 4.0)) is None
     assert link.check(2.0, nt_connected=False) is None            # said once
     back = link.on_reading(2.5, robot_enabled=True)
     assert back.level == 'info' and back.message.startswith('robot back, enabled')

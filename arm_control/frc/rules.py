@@ -1,7 +1,7 @@
 """What is fresh and what is allowed, on the bridge's side of the link (``RobotLink``): the
-controller's commands go to the robot only while its readings are fresh and it is enabled,
-else 0 V; the controller is disabled and enabled with the robot. (The robot's side:
-``robot_loop``.)
+controller's commands go to the robot only while its readings are fresh and it is enabled;
+a lost robot is sent nothing (it stops by its own rule), any other 0 V. The controller is
+disabled and enabled with the robot. (The robot's side: ``robot_loop``.)
 """
 
 from dataclasses import dataclass
@@ -15,7 +15,7 @@ class LinkState(str, Enum):
     CONNECTING = 'connecting'       # no reading from the robot yet: 0 V
     ENABLED = 'enabled'             # fresh readings, robot enabled: the controller commands it
     DISABLED = 'disabled'           # fresh readings, robot disabled: 0 V
-    LOST = 'lost'                   # no reading for reading_timeout_s: 0 V
+    LOST = 'lost'                   # no reading for reading_timeout_s: nothing sent
 
     def __str__(self) -> str:
         return self.value
@@ -67,8 +67,13 @@ class RobotLink:
         """The bridge's awake time since the last reading."""
         return self.awake_s - self.awake_at_reading_s
 
-    def outgoing(self, voltage) -> tuple[float, float]:
-        """The voltage to send: the controller's while the robot may be commanded, else 0 V."""
+    def outgoing(self, voltage) -> tuple[float, float] | None:
+        """The voltage to send: the controller's while the robot may be commanded; None (send
+        nothing) while it is lost; else 0 V. A lost link may only have stalled: what is sent
+        into it arrives when it recovers, and 0 V would then drop an arm the robot holds at
+        its last profile's end (its rule when commands stop)."""
+        if self.state == LinkState.LOST:
+            return None
         return tuple(voltage) if self.may_command else ZERO_V
 
     def on_reading(self, now_s: float, robot_enabled: bool) -> LinkEvent | None:
@@ -100,5 +105,6 @@ class RobotLink:
         why = (f'no readings for {self.silent_s:.2f} s (NT still connected)' if nt_connected
                else 'NT disconnected')
         return LinkEvent(LinkState.LOST, 'error',
-                         f'lost the robot: {why}: 0 V until it is back; the controller stops '
-                         'as its joint states do', None)
+                         f'lost the robot: {why}: no commands until it is back (it holds where '
+                         'its last profile ends); the controller stops as its joint states do',
+                         None)

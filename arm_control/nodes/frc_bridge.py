@@ -7,8 +7,9 @@ all stamped with the instant the robot read its sensors. ``voltage_command`` goe
 robot, flushed at once: a voltage pair as a command for the instant it is sent, a profile
 (``model.profile``) with its start on the robot's clock; in mode ``setpoint``, instead of
 the controller's voltages, its ``controller/setpoint`` with the model's feedforward as a
-one-setpoint profile for its stamp. A disabled robot, a dropped connection, or one
-whose readings stop for ``reading_timeout_s`` (an error) gets 0 V. The controller is
+one-setpoint profile for its stamp. A disabled robot gets 0 V; a dropped connection, or
+readings stopped for ``reading_timeout_s`` (an error), no commands (a link that only stalled
+would deliver them late): the robot stops by its own rule. The controller is
 disabled and enabled with the robot (``controller/enable``); when the robot is lost, its
 joint states stop, and it stops commanding on its own. Draws the arm as a Mechanism2d on NT
 (its own connection, at most 25 Hz),
@@ -61,7 +62,7 @@ STATE_STATUS = {
     LinkState.ENABLED: (DiagnosticStatus.OK, 'robot enabled'),
     LinkState.DISABLED: (DiagnosticStatus.WARN, 'robot disabled: 0 V'),
     LinkState.CONNECTING: (DiagnosticStatus.WARN, 'waiting for the robot at {server}'),
-    LinkState.LOST: (DiagnosticStatus.ERROR, 'lost the robot: 0 V')}
+    LinkState.LOST: (DiagnosticStatus.ERROR, 'lost the robot: no commands')}
 
 
 def stamp_s(header: Header) -> float:
@@ -219,13 +220,15 @@ class FrcBridgeNode(Node):
             if self.link.may_command:
                 start_us = self.server_time_us(round(command.start_s * 1e9))
                 self.send(encode_profile(profile_command(start_us, command)))
-            else:
+            elif self.link.outgoing(ZERO_V) is not None:
                 self.send(encode_voltage(self.tables.server_now_us(), ZERO_V))
             self.record(CONTROLLER_VOLTAGE, list(msg.data))
             return
         voltage = clamp_voltage(command, self.arm.battery.nominal_voltage)
         outgoing = self.link.outgoing(voltage)
-        if self.config.mode == 'voltage' or not commanding(outgoing):
+        if outgoing is None:
+            pass                # lost: nothing, the robot stops by its own rule
+        elif self.config.mode == 'voltage' or not commanding(outgoing):
             self.send(encode_voltage(self.tables.server_now_us(), outgoing))
         elif self.setpoint is not None and \
                 self.now_s() - self.setpoint[3] <= SETPOINT_MAX_AGE_S:
@@ -293,7 +296,7 @@ class FrcBridgeNode(Node):
             self.get_logger().info(event.message)
         self.events_pub.publish(String(data=event.message))
         self.record(BRIDGE_EVENTS, event.message)
-        if not self.link.may_command:
+        if not self.link.may_command and self.link.outgoing(ZERO_V) is not None:
             self.send(encode_voltage(self.tables.server_now_us(), ZERO_V))
         if event.controller_enabled is not None:
             self.enable_wanted = event.controller_enabled
