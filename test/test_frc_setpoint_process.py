@@ -1,8 +1,8 @@
 """The bridge in mode ``setpoint``, end to end: the controller's setpoint and the model's
 feedforward go to the robot, whose own loop (frc_robot_sim's PD) closes it."""
 
+from frc_rig import GOALS, reach, running_rig
 import pytest
-from test_frc_bridge_process import GOALS, reach, running_rig
 
 
 @pytest.fixture(scope='module')
