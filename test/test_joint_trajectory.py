@@ -7,10 +7,11 @@ import math
 
 import numpy as np
 import pytest
+from trajectory_checks import moveit_style, request
 
 from arm_control.control.joint_trajectory import (ErrorCode, in_arm_order, JointTolerance,
-                                                  SplineTrajectory, start_delay_s, TrajectoryPoint,
-                                                  TrajectoryRefused, TrajectoryRequest)
+                                                  SplineTrajectory, start_delay_s,
+                                                  TrajectoryRefused)
 from arm_control.control.motions import Motion
 from arm_control.control.trajectory_goals import (FollowSettings, Tolerances, TrajectoryGoals,
                                                   TrajectoryWatch)
@@ -35,28 +36,6 @@ def goals(arm, controller_config, settings):
 
 def at_rest(q=START):
     return lambda t: (np.array(q, float), np.zeros(2), np.zeros(2))
-
-
-def request(names, rows, **fields):
-    """rows: (time, positions[, velocities[, accelerations]])."""
-    points = tuple(TrajectoryPoint(tuple(r[1]), *(tuple(v) for v in r[2:]),
-                                   time_from_start_s=r[0]) for r in rows)
-    return TrajectoryRequest(tuple(names), points, **fields)
-
-
-def moveit_style(start, end, duration_s, count=12):
-    """A MoveIt-like trajectory: points along a smooth profile with positions, velocities
-    and accelerations, the first at the start at time 0."""
-    start, end = np.asarray(start, float), np.asarray(end, float)
-    rows = []
-    for t in np.linspace(0.0, duration_s, count):
-        u = t / duration_s                          # s(u) = 10u³ − 15u⁴ + 6u⁵: rest to rest
-        s = 10 * u ** 3 - 15 * u ** 4 + 6 * u ** 5
-        sd = (30 * u ** 2 - 60 * u ** 3 + 30 * u ** 4) / duration_s
-        sdd = (60 * u - 180 * u ** 2 + 120 * u ** 3) / duration_s ** 2
-        rows.append((float(t), start + s * (end - start), sd * (end - start),
-                     sdd * (end - start)))
-    return rows
 
 
 def test_the_spline_passes_through_every_point_with_its_velocity_and_acceleration():

@@ -4,14 +4,13 @@ the controller follow it (``use_sim_time``), and the arm moves as it does in rea
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
+from goal_checks import assert_each_goal_reached_and_still, goal_publisher, reached, tool_track
 import numpy as np
 import pytest
 from rosgraph_msgs.msg import Clock
 from scipy.stats import theilslopes
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
-from test_controller_process import (assert_each_goal_reached_and_still, goal_publisher,
-                                     reached, tool_track)
 
 from arm_control import config
 from arm_control.model.world import ForbiddenSpace

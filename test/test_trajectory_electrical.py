@@ -12,7 +12,7 @@ import math
 from conftest import with_joint
 import numpy as np
 import pytest
-from test_trajectory import follow_open_loop, PATHS, worst_over_limits
+from trajectory_checks import follow_open_loop, PATHS, worst_over_limits
 
 from arm_control import config
 from arm_control.model.dynamics import ArmDynamics

@@ -6,7 +6,7 @@ import math
 from controller_rig import Rig
 import numpy as np
 import pytest
-from test_joint_trajectory import moveit_style, request
+from trajectory_checks import moveit_style, request
 
 from arm_control.control.goals import Goal
 from arm_control.control.motions import Motion

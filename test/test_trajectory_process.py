@@ -15,7 +15,7 @@ import pytest
 from rclpy.action import ActionClient, get_action_names_and_types
 from ros_harness import stamp_s
 from sensor_msgs.msg import JointState
-from test_joint_trajectory import moveit_style
+from trajectory_checks import moveit_style
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from arm_control.nodes.common import COMMANDS

@@ -1,10 +1,12 @@
 """What the trajectory tests check a trajectory with: the default arm's paths, dense samples,
-the model's voltage along it, and the plant driven open loop by its feedforward."""
+the model's voltage along it, and the plant driven open loop by its feedforward; and the
+joint trajectories a ROS client sends (``request``, ``moveit_style``)."""
 
 import math
 
 import numpy as np
 
+from arm_control.control.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.plant import ArmPlant
 
@@ -73,3 +75,25 @@ def follow_open_loop(arm, trajectory, start_velocity=(0.0, 0.0), step_s=0.001, h
         plant.set_voltage(dynamics.voltage_for(q, qd, qdd))
         plant.advance(step_s)
     return np.array(plant.state)
+
+
+def request(names, rows, **fields):
+    """rows: (time, positions[, velocities[, accelerations]])."""
+    points = tuple(TrajectoryPoint(tuple(r[1]), *(tuple(v) for v in r[2:]),
+                                   time_from_start_s=r[0]) for r in rows)
+    return TrajectoryRequest(tuple(names), points, **fields)
+
+
+def moveit_style(start, end, duration_s, count=12):
+    """A MoveIt-like trajectory: points along a smooth profile with positions, velocities
+    and accelerations, the first at the start at time 0."""
+    start, end = np.asarray(start, float), np.asarray(end, float)
+    rows = []
+    for t in np.linspace(0.0, duration_s, count):
+        u = t / duration_s                          # s(u) = 10u³ − 15u⁴ + 6u⁵: rest to rest
+        s = 10 * u ** 3 - 15 * u ** 4 + 6 * u ** 5
+        sd = (30 * u ** 2 - 60 * u ** 3 + 30 * u ** 4) / duration_s
+        sdd = (60 * u - 180 * u ** 2 + 120 * u ** 3) / duration_s ** 2
+        rows.append((float(t), start + s * (end - start), sd * (end - start),
+                     sdd * (end - start)))
+    return rows
