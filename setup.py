@@ -25,7 +25,7 @@ setup(
     entry_points={
         'console_scripts': [
             'sim = arm_control.nodes.sim:main',
-            'controller = arm_control.nodes.controller:main',
+            'controller = arm_control.nodes.controller_start:main',
             'planner = arm_control.nodes.planner:main',
             'tour = arm_control.nodes.tour:main',
             'viewer = arm_control.nodes.viewer:main',

@@ -13,10 +13,11 @@ A plan from rest is answered twice: first a quick trajectory the arm starts on a
 its refinement (``PlanTimer.refine``) from a hand-over time a safe margin past when the
 refinement is expected to be ready -- unless a newer request is already waiting -- and,
 when it took so long that it surely came too late, once more from later on. The worker says
-it is ready once its timing kernels are loaded; then, only while no request waits, it warms
-up in slices (``_WarmUp``: the forbidden-space cells its checks look up, a move between two
-presets answered for itself, the moving-start solver imported), so that later goals find
-the caches warm while the first one is never kept waiting for all of it.
+it is ready once its timing kernels are loaded (before its settings come: the ``controller``
+executable starts it first, ``controller_start``); then, only while no request waits, it
+warms up in slices (``_WarmUp``: the forbidden-space cells its checks look up, a move
+between two presets answered for itself, the moving-start solver imported), so that later
+goals find the caches warm while the first one is never kept waiting for all of it.
 
 Each path answered from rest then goes to the keeper, a second process at nice
 ``KEEPER_NICE``, which times it finely from rest; the worker keeps what comes back
@@ -45,6 +46,7 @@ from arm_control.control.plan_messages import (Done, KeeperJob, KeeperResult, Ke
                                                Keeping, KeepPath, Kept, PathPlan, PlanRequest,
                                                Ready, Settings, TimedPlan, TimePlan)
 from arm_control.control.plans import PlanTimer
+from arm_control.nodes.controller_start import spawn, take_started
 from arm_control.realtime import raised
 from arm_control.timing.bus import compile_kernels
 from arm_control.timing.moving_start import toppra_solver
@@ -91,6 +93,7 @@ def _serve(requests: Connection, results: Connection) -> None:
     """The worker (``plan_messages``): times each plan with the latest ``Settings``, the
     answers from rest in two (the quick one, then its refinement), then says the request
     ``Done``; hands the keeper the paths worth keeping and keeps what it times."""
+    compile_kernels()               # loaded from numba's cache (or compiled) while it waits
     timer = warm_up = None
     clock = HandoverClock()
     incoming = _Incoming(requests)
@@ -117,7 +120,6 @@ def _serve(requests: Connection, results: Connection) -> None:
                     keeping.retune(settings)
                     results.send(Kept(0))
                     if first:
-                        compile_kernels()       # loaded from numba's cache, or compiled
                         results.send(Ready())
                         warm_up = _WarmUp()
                 case Keeping(allowed):
@@ -388,10 +390,7 @@ class _Child:
     its stdin (``requests``) and stdout (``results``)."""
 
     def __init__(self, *args, nice: int = 0):
-        self.process = subprocess.Popen(
-            [sys.executable, '-m', 'arm_control.nodes.plan_worker', *args],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            preexec_fn=(lambda: os.nice(nice)) if nice else None)
+        self.process = (None if args else take_started()) or spawn(*args, nice=nice)
         self.requests = Connection(os.dup(self.process.stdin.fileno()), readable=False)
         self.results = Connection(os.dup(self.process.stdout.fileno()), writable=False)
         self.process.stdin.close()

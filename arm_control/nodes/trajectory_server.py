@@ -110,7 +110,9 @@ class TrajectoryServer:
         self.server = ActionServer(node, FollowJointTrajectory, '~/follow_joint_trajectory',
                                    execute_callback=self.execute,
                                    cancel_callback=lambda request: CancelResponse.ACCEPT)
-        node.create_timer(1.0 / MONITOR_RATE_HZ, self.monitor)
+        # Only while a goal is followed: an idle timer would wake the executor 20 times a second.
+        self.monitor_timer = node.create_timer(1.0 / MONITOR_RATE_HZ, self.monitor)
+        self.monitor_timer.cancel()
 
     @property
     def bad_inputs(self) -> int:        # ``guarded`` counts a failed callback on the node
@@ -249,6 +251,7 @@ class TrajectoryServer:
             self.finish(self.active, ErrorCode.INVALID_GOAL, 'preempted by a newer goal')
         future = Future()
         self.active = Active(handle, goal, watch, future, note, self.node.core_now_s())
+        self.monitor_timer.reset()
         return await future
 
     def finish(self, active: Active, code: ErrorCode, text: str, cancelled=False) -> None:
@@ -271,6 +274,7 @@ class TrajectoryServer:
         longer following it (then, as JTC, it brakes along its path and holds)."""
         active = self.active
         if active is None:
+            self.monitor_timer.cancel()
             return
         core = self.node.core
         motion = active.watch.motion
