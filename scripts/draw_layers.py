@@ -25,9 +25,10 @@ from matplotlib import patches, pyplot  # noqa: E402
 LAYERS = {'parameters': 0, 'text': 0, 'realtime': 0, 'config': 1, 'logs': 1, 'model': 2,
           'timing': 3, 'planning': 3, 'sysid': 3, 'frc': 3, 'control': 4, 'visual': 4,
           'bringup': 5, 'nodes': 5}
-# Modules of nodes/ that are executables: a shell importing another shell is sideways.
-SHELLS = {'sim', 'controller', 'planner', 'tour', 'viewer', 'markers', 'recorder',
-          'frc_bridge', 'sysid'}
+# Modules of nodes/ that are executables (setup.py's console scripts): a shell importing
+# another shell is sideways.
+SHELLS = {'sim', 'controller_start', 'planner', 'tour', 'viewer', 'markers', 'recorder',
+          'frc_bridge', 'sysid', 'arm_cli'}
 # What draws does not run the loop or plan.
 RUNS_THE_LOOP = ('control.controller', 'control.arm_controller', 'control.closed_loop',
                  'planning.planner')

@@ -6,6 +6,7 @@ Read from the source (ast), so a new import is checked the moment it is written.
 
 import ast
 from pathlib import Path
+import re
 import sys
 
 import pytest
@@ -40,6 +41,11 @@ SOURCES = {module_name(path): path for path in sorted(PACKAGE.rglob('*.py'))}
 def test_every_room_has_a_floor():
     rooms = {draw_layers.room_of(module) for module in SOURCES if module != PACKAGE.name}
     assert rooms <= set(draw_layers.LAYERS), sorted(rooms - set(draw_layers.LAYERS))
+
+
+def test_the_shells_are_the_executables():
+    scripts = re.findall(r"'[\w]+ = arm_control\.nodes\.(\w+):", (ROOT / 'setup.py').read_text())
+    assert set(scripts) == draw_layers.SHELLS
 
 
 def test_imports_point_down_the_floors():

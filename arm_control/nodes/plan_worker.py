@@ -46,7 +46,7 @@ from arm_control.control.plan_messages import (Done, KeeperJob, KeeperResult, Ke
                                                Keeping, KeepPath, Kept, PathPlan, PlanRequest,
                                                Ready, Settings, TimedPlan, TimePlan)
 from arm_control.control.plans import PlanTimer
-from arm_control.nodes.controller_start import spawn, take_started
+from arm_control.nodes.worker_spawn import spawn, take_started
 from arm_control.realtime import raised
 from arm_control.timing.bus import compile_kernels
 from arm_control.timing.moving_start import toppra_solver
