@@ -14,7 +14,8 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from arm_control import config
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
-from arm_control.planning.planner import Planner, poses_from_waypoints, waypoints_from_poses
+from arm_control.planning.planner import Planner
+from arm_control.planning.poses import poses_from_waypoints, waypoints_from_poses
 
 FRC_FILE = Path(__file__).resolve().parents[1] / 'config' / 'frc_robot.yaml'
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,

@@ -11,7 +11,8 @@ from arm_control import config
 from arm_control.config import PlannerConfig, Rectangle
 from arm_control.control.plan_caches import PresetAnswers
 from arm_control.control.plans import BranchRanking
-from arm_control.planning.planner import Planner, poses_from_waypoints
+from arm_control.planning.planner import Planner
+from arm_control.planning.poses import poses_from_waypoints
 
 
 @pytest.fixture(scope='module')

@@ -13,8 +13,8 @@ from arm_control import config
 from arm_control.config import PlannerConfig
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.graph import ConfigurationGrid, DIRECTIONS
-from arm_control.planning.planner import (Plan, Planner, poses_from_waypoints, travel_rad,
-                                          waypoints_from_poses)
+from arm_control.planning.planner import Plan, Planner, travel_rad
+from arm_control.planning.poses import poses_from_waypoints, waypoints_from_poses
 
 
 @pytest.fixture(scope='module')

@@ -26,7 +26,7 @@ from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.plan_worker import _Incoming, PlanWorker
-from arm_control.planning.planner import poses_from_waypoints, waypoints_from_poses
+from arm_control.planning.poses import poses_from_waypoints, waypoints_from_poses
 from arm_control.timing import (bus, exact, refined_trajectory, time_optimal_trajectory,
                                 TrajectoryLimits)
 from arm_control.timing.bus import compile_kernels, exact_timing

@@ -23,7 +23,7 @@ from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes import messages
 from arm_control.nodes.plan_worker import PlanWorker
-from arm_control.planning.planner import waypoints_from_poses
+from arm_control.planning.poses import waypoints_from_poses
 
 # A call unanswered this long is sent again, at most RESENDS times; the earlier calls stay
 # open and the first answer counts. An answer can be lost: a planner we have just found may

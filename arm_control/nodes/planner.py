@@ -43,7 +43,8 @@ from arm_control.control.plan_caches import PresetAnswers
 from arm_control.control.plans import BranchRanking
 from arm_control.nodes import messages
 from arm_control.nodes.common import declare_parameters, LATCHED, run, status
-from arm_control.planning.planner import Planner, poses_from_waypoints
+from arm_control.planning.planner import Planner
+from arm_control.planning.poses import poses_from_waypoints
 from arm_control.text import quote
 from arm_control.timing.bus import compile_kernels
 
