@@ -1,6 +1,8 @@
 """The controller node as it starts, in process: before it has first looked for the planner,
 a goal waits in the queue like one that comes while it looks."""
 
+import os
+
 import rclpy
 
 from arm_control.control.events import EventKind as Kind
@@ -11,7 +13,8 @@ def test_a_goal_before_the_first_look_for_the_planner_waits_for_it(domain):
     """Constructed and not yet spun, the node has said once that it waits for the planner,
     and a preset sent then is queued until the planner is up, not planned (it would fail at
     the planner timeout: the service is not there yet)."""
-    rclpy.init(domain_id=domain)
+    # At real-time priority the node would raise this thread, pytest's, for every later test.
+    rclpy.init(args=['--ros-args', '-p', 'realtime_priority:=0'], domain_id=domain)
     node = None
     try:
         node = ControllerNode()
@@ -26,3 +29,4 @@ def test_a_goal_before_the_first_look_for_the_planner_waits_for_it(domain):
             node.plans.close()
             node.destroy_node()
         rclpy.try_shutdown()
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER
