@@ -25,7 +25,7 @@ with sensor noise, physics on 1 ms steps:
     python bench/bench_sysid.py --file /tmp/arm_sysid/identified_params.yaml
                                                   # ... with a file from a run of the node
     python bench/bench_sysid.py --no-controller   # 1 and 2 only
-    python bench/bench_sysid.py --seeds 12        # only: is the stated ±1σ honest?
+    python bench/bench_sysid.py --seeds 12 [--write-docs]  # only: is the stated ±1σ honest?
 """
 
 from dataclasses import replace
@@ -38,6 +38,7 @@ BENCH = Path(__file__).resolve().parent
 sys.path[:0] = [str(BENCH), str(BENCH.parent)]       # the suites beside, the package above
 
 from bench_trajectory import _start_configuration, Move, SUITE  # noqa: E402
+import docs_table  # noqa: E402
 import in_process  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.signal import savgol_filter  # noqa: E402
@@ -150,13 +151,18 @@ def coverage(truth, default, settings, seeds):
         sigmas.append(fit.standard_errors)
     estimates, sigmas = np.array(estimates), np.array(sigmas)
     z = (estimates - base_parameters(truth)) / sigmas
-    print(f'{seeds} identification runs of the demo arm (sensor-noise seeds 100 to '
-          f'{99 + seeds}):')
-    print('| base parameter | largest error / σ | mean error / σ | spread / mean σ |')
-    print('|---|---|---|---|')
+    lines = [f'{seeds} identification runs of the demo arm (sensor-noise seeds 100 to '
+             f'{99 + seeds}):', '',
+             '| base parameter | largest error / σ | mean error / σ | spread / mean σ |',
+             '|---|---|---|---|']
     for k, (name, unit, _) in enumerate(BASE_PARAMETERS):
-        print(f'| {name} ({unit}) | {np.max(np.abs(z[:, k])):.1f} | {np.mean(z[:, k]):+.2f} | '
-              f'{np.std(estimates[:, k]) / np.mean(sigmas[:, k]):.2f} |')
+        lines.append(f'| {name} ({unit}) | {np.max(np.abs(z[:, k])):.1f} | '
+                     f'{np.mean(z[:, k]):+.2f} | '
+                     f'{np.std(estimates[:, k]) / np.mean(sigmas[:, k]):.2f} |')
+    lines.append(f'\nWithin 2σ of the truth: {np.mean(np.abs(z) < 2):.1%}; within 1σ: '
+                 f'{np.mean(np.abs(z) < 1):.1%}.')
+    print('\n'.join(lines))
+    return '\n'.join(lines)
 
 
 def main(argv):
@@ -165,7 +171,10 @@ def main(argv):
     settings = SysIdConfig.from_parameters(
         parameters.read_parameter_file(CONFIG / 'arm.yaml', 'sysid'))
     if '--seeds' in argv:
-        coverage(truth, default, settings, int(argv[argv.index('--seeds') + 1]))
+        table = coverage(truth, default, settings, int(argv[argv.index('--seeds') + 1]))
+        if '--write-docs' in argv:
+            docs_table.write('bench_sysid_seeds', 'System identification: is the stated σ '
+                             'honest?', 'python bench/bench_sysid.py ' + ' '.join(argv), table)
         return
     # 1. identification
     began = time.process_time()

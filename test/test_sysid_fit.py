@@ -139,10 +139,11 @@ def test_the_identification_run_is_safe_and_short(noisy_run, demo, settings):
 
 def test_stalls_of_the_command_stream_are_ridden_through_within_the_current_cap(
         demo, arm, settings):
-    """The node starved of CPU for 0.45 s three times (in the multi-sine, the shoulder's steps
-    and the elbow's): the robot gets the last command, then 0 V. The excitation rejoins the
-    plan each time instead of stopping, never enters forbidden space, keeps every motor
-    under max_current_a, and the fit (which leaves the stalls out) still finds the arm."""
+    """The node starved of CPU for 0.45 s three times (in the elbow's slow sweeps, the
+    multi-sine and the elbow's fast sweeps): the robot gets the last command, then 0 V. The
+    excitation rejoins the plan each time instead of stopping, never enters forbidden space,
+    keeps every motor under max_current_a, and the fit (which leaves the stalls out) still
+    finds the arm."""
     stalls = ((12.0, 0.45), (27.5, 0.45), (39.0, 0.45))
     run = identification_run(demo, arm, settings, seed=2, stalls=stalls)
     assert run.session.stopped is None and len(run.session.stalls) == 3
