@@ -1,9 +1,11 @@
-"""The controller node as it starts, in process: before it has first looked for the planner,
-a goal waits in the queue like one that comes while it looks."""
+"""The controller node in process: before it has first looked for the planner, a goal waits
+in the queue like one that comes while it looks; once it has yielded the arm to another
+controller, it takes no settings."""
 
 import os
 
 import rclpy
+from rclpy.parameter import Parameter
 
 from arm_control.control.events import EventKind as Kind
 from arm_control.nodes.controller import ControllerNode
@@ -30,3 +32,24 @@ def test_a_goal_before_the_first_look_for_the_planner_waits_for_it(domain):
             node.destroy_node()
         rclpy.try_shutdown()
     assert os.sched_getscheduler(0) == os.SCHED_OTHER
+
+
+def test_a_controller_that_yielded_refuses_settings_and_keeps_its_own(domain):
+    rclpy.init(args=['--ros-args', '-p', 'realtime_priority:=0'], domain_id=domain)
+    node = None
+    try:
+        node = ControllerNode()
+        gains = node.get_parameter('shoulder_pid').value
+        node.claims.yielding = True
+        result = node.set_parameters([Parameter('shoulder_pid', value=[1.0, 0.0, 0.0])])[0]
+        assert not result.successful
+        assert node.get_parameter('shoulder_pid').value == gains
+        node.claims.yielding = False
+        result = node.set_parameters([Parameter('shoulder_pid', value=[1.0, 0.0, 0.0])])[0]
+        assert result.successful, result.reason
+    finally:
+        if node is not None:
+            node.loop.stop()
+            node.plans.close()
+            node.destroy_node()
+        rclpy.try_shutdown()

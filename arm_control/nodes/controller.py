@@ -278,6 +278,9 @@ class ControllerNode(Node):
         from the next period, or refused with the reason (the old values kept)."""
         if self.core is None:
             return None                             # the overrides at start: read below
+        if self.claims.yielding:                    # the change is meant for the one in charge
+            return ('another controller has the arm: this one yielded and takes no settings '
+                    '(two nodes share the name: set them on the one commanding)')
         try:
             settings = controller_settings(params, self.settings)
         except ParameterError as error:
