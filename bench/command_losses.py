@@ -19,8 +19,8 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent / 'test'), str(HERE.parent)]
 
 from bench_ros import lowest_mm  # noqa: E402
+from controller_rig import run, START  # noqa: E402
 import numpy as np  # noqa: E402
-from test_reliability_core import run, START  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.controller import ArmController  # noqa: E402

@@ -21,7 +21,7 @@ sys.path[:0] = [str(HERE.parent / 'test'), str(HERE)]
 
 from docs_table import write  # noqa: E402
 import numpy as np  # noqa: E402
-from test_joint_trajectory import moveit_style, request  # noqa: E402
+from trajectory_checks import moveit_style, request  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.closed_loop import ClosedLoop  # noqa: E402

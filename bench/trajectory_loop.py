@@ -28,8 +28,8 @@ from docs_table import write  # noqa: E402
 import numpy as np  # noqa: E402
 from rclpy.action import ActionClient  # noqa: E402
 from ros_harness import Probe  # noqa: E402
-from test_joint_trajectory import moveit_style  # noqa: E402
-from test_trajectory_process import goal_of  # noqa: E402
+from trajectory_checks import moveit_style  # noqa: E402
+from trajectory_messages import goal_of  # noqa: E402
 
 UP, DOWN = (1.5708, -1.5708), (0.9, -0.5)
 

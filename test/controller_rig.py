@@ -57,3 +57,17 @@ def drift(start, offset_rad, steps, period=0.02):
 
 def still(q, count):
     return [reading_at(q)] * count
+
+
+def run(core, plant, seconds, period_s, sensors=True, until=None):
+    """Step core and plant together; returns the times of the steps."""
+    times = []
+    for _ in range(round(seconds / period_s)):
+        reading = plant.read() if sensors else None
+        voltage = core.step(plant.time_s, reading)
+        times.append((plant.time_s, np.array(voltage)))
+        plant.set_voltage(voltage)
+        plant.advance(period_s)
+        if until is not None and until():
+            break
+    return times

@@ -81,8 +81,10 @@ def test_no_module_reaches_back_to_one_that_imports_it():
 
 
 def test_no_test_module_imports_another():
+    """Nor does a bench: what tests and benches share lives in the rigs."""
     tests = {path.stem for path in (ROOT / 'test').rglob('test_*.py')}
+    sources = sorted((ROOT / 'test').rglob('*.py')) + sorted((ROOT / 'bench').glob('*.py'))
     borrowing = {path.name: sorted({name.split('.')[0] for name in imports(path)}
                                    & tests - {path.stem})
-                 for path in sorted((ROOT / 'test').rglob('*.py'))}
+                 for path in sources}
     assert not {name: borrowed for name, borrowed in borrowing.items() if borrowed}

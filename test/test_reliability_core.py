@@ -11,6 +11,7 @@
 import dataclasses
 import math
 
+from controller_rig import run, START
 import numpy as np
 
 from arm_control import config
@@ -22,22 +23,6 @@ from arm_control.control.state_machine import ArmState
 from arm_control.model.plant import ArmPlant
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.planner import Planner
-
-START = (1.5708, -1.5708)
-
-
-def run(core, plant, seconds, period_s, sensors=True, until=None):
-    """Step core and plant together; returns the times of the steps."""
-    times = []
-    for _ in range(round(seconds / period_s)):
-        reading = plant.read() if sensors else None
-        voltage = core.step(plant.time_s, reading)
-        times.append((plant.time_s, np.array(voltage)))
-        plant.set_voltage(voltage)
-        plant.advance(period_s)
-        if until is not None and until():
-            break
-    return times
 
 
 def test_commanding_ends_within_the_joint_state_timeout(arm, controller_config):

@@ -8,7 +8,6 @@ import time
 
 from action_msgs.msg import GoalStatus
 from arm_rig import DEG, START_Q
-from builtin_interfaces.msg import Duration
 from control_msgs.action import FollowJointTrajectory
 import numpy as np
 import pytest
@@ -16,30 +15,13 @@ from rclpy.action import ActionClient, get_action_names_and_types
 from ros_harness import stamp_s
 from sensor_msgs.msg import JointState
 from trajectory_checks import moveit_style
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from trajectory_messages import goal_of, trajectory
+from trajectory_msgs.msg import JointTrajectory
 
 from arm_control.nodes.common import COMMANDS
 
 ACTION = '/controller/follow_joint_trajectory'
 Result = FollowJointTrajectory.Result
-
-
-def duration(t_s: float) -> Duration:
-    return Duration(sec=int(t_s), nanosec=int(round((t_s - int(t_s)) * 1e9)))
-
-
-def trajectory(names, rows) -> JointTrajectory:
-    """rows: (time, positions[, velocities[, accelerations]])."""
-    message = JointTrajectory(joint_names=list(names))
-    for row in rows:
-        point = JointTrajectoryPoint(positions=[float(v) for v in row[1]],
-                                     time_from_start=duration(row[0]))
-        if len(row) > 2:
-            point.velocities = [float(v) for v in row[2]]
-        if len(row) > 3:
-            point.accelerations = [float(v) for v in row[3]]
-        message.points.append(point)
-    return message
 
 
 @pytest.fixture(scope='module')
@@ -65,10 +47,6 @@ class Sent:
         assert self.rig.spin_until(self.result_future.done, timeout_s), 'no result'
         answer = self.result_future.result()
         return answer.status, answer.result
-
-
-def goal_of(names, rows, **fields) -> FollowJointTrajectory.Goal:
-    return FollowJointTrajectory.Goal(trajectory=trajectory(names, rows), **fields)
 
 
 @pytest.fixture
