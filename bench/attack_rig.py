@@ -10,7 +10,7 @@ import sys
 import time
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parent / 'test'), str(HERE)]
+sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE)]
 
 from arm_rig import ArmRig, flood_goals, point, START_Q  # noqa: E402
 from geometry_msgs.msg import PointStamped, TwistStamped  # noqa: E402

@@ -2,7 +2,7 @@
 (the second suite, what reaches the nodes while they run, is in bench/attacks_live.py).
 
 sim, planner and controller run as separate processes on a ROS domain of their own (as the
-process tests run them, through test/arm_rig.py); this process attacks them one attack at
+process tests run them, through test/rigs/arm_rig.py); this process attacks them one attack at
 a time, each on a reset arm (or a fresh one, after an attack that leaves the nodes
 changed), and listens. One markdown table comes out, a row per attack:
 
@@ -39,7 +39,7 @@ import tempfile
 import time
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parent / 'test'), str(HERE)]
+sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE)]
 
 from arm_rig import ArmRig, BAD_GOALS, flood_goals, START_Q  # noqa: E402
 from attack_rig import (ANSWERS, ARM, Bench, BIG, Listener, LISTENER_PRIORITY,  # noqa: E402

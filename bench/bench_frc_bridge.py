@@ -26,7 +26,7 @@ import threading
 import time
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parent / 'test'), str(HERE.parent)]
+sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE.parent)]
 
 import ntcore  # noqa: E402
 import numpy as np  # noqa: E402

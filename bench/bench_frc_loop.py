@@ -38,7 +38,7 @@ import threading
 import time
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parent / 'test'), str(HERE.parent), str(HERE)]
+sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE.parent), str(HERE)]
 
 from frc_loop_measures import (bridge_reading_ages, controller_hearing,  # noqa: E402
                                mixed_readings, others_realtime_cores, others_realtime_ticks,

@@ -2,7 +2,7 @@
 process and against the minimum time (issue 18).
 
 sim, planner and controller run as separate processes on a ROS domain of their own, as the
-process tests start them (``test/arm_rig.py``). For each move of the suite
+process tests start them (``test/rigs/arm_rig.py``). For each move of the suite
 (``bench_trajectory.SUITE``) a goal on ``/goal_point`` takes the arm to the move's start, as
 a user's would, and the arm comes to rest there; then the move's goal is published. The move
 takes from that publication until the arm came, for good, within 1° on both joints of where
@@ -50,7 +50,7 @@ import tempfile
 import time
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parent / 'test'), str(HERE)]
+sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE)]
 
 from arm_rig import ArmRig  # noqa: E402
 from bench_trajectory import SUITE  # noqa: E402

@@ -22,7 +22,7 @@ import tempfile
 import time
 
 BENCH = Path(__file__).resolve().parent
-sys.path[:0] = [str(BENCH), str(BENCH.parent), str(BENCH.parent / 'test')]
+sys.path[:0] = [str(BENCH), str(BENCH.parent), str(BENCH.parent / 'test' / 'rigs')]
 
 import busy  # noqa: E402
 import docs_table  # noqa: E402

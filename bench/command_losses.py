@@ -16,7 +16,7 @@ from pathlib import Path
 import sys
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parent / 'test'), str(HERE.parent)]
+sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE.parent)]
 
 from bench_ros import lowest_mm  # noqa: E402
 from controller_rig import run, START  # noqa: E402

@@ -1,7 +1,7 @@
 """What a team's coprocessor sees: how soon a first goal is reached after the nodes start,
 and the share of one core each process takes, holding still and touring.
 
-The installed sim, planner and controller (``test/arm_rig.py``'s ArmRig) start together on a
+The installed sim, planner and controller (``test/rigs/arm_rig.py``'s ArmRig) start together on a
 ROS domain of their own. A goal (``mid_score``) is published once, as soon as the controller
 subscribes to ``goal_point``: the bench says whether it was kept or refused. If refused, it is
 sent again once the controller's diagnostics say it reaches the planner, as the ``arm`` tool
@@ -24,7 +24,7 @@ import tempfile
 import time
 
 BENCH = Path(__file__).resolve().parent
-sys.path[:0] = [str(BENCH), str(BENCH.parent / 'test'), str(BENCH.parent)]
+sys.path[:0] = [str(BENCH), str(BENCH.parent / 'test' / 'rigs'), str(BENCH.parent)]
 
 import busy  # noqa: E402
 import docs_table  # noqa: E402

@@ -29,7 +29,7 @@ import random
 import sys
 
 BENCH = Path(__file__).resolve().parent
-sys.path[:0] = [str(BENCH), str(BENCH.parent / 'test')]
+sys.path[:0] = [str(BENCH), str(BENCH.parent / 'test' / 'rigs')]
 
 from arm_rig import ArmRig  # noqa: E402
 from bench_ros import breakdown_ms, nodes, RosMoves, wait_for_presets_kept  # noqa: E402

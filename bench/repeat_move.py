@@ -21,7 +21,7 @@ import tempfile
 import time
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parent / 'test'), str(HERE)]
+sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE)]
 
 from arm_rig import ArmRig  # noqa: E402
 from bench_ros import RosMoves  # noqa: E402

@@ -36,7 +36,7 @@ import statistics
 import sys
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parent / 'test'), str(HERE), str(HERE.parent)]
+sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE), str(HERE.parent)]
 
 from bench_trajectory import SUITE  # noqa: E402
 import docs_table  # noqa: E402

@@ -38,7 +38,7 @@ import tempfile
 import time
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parent / 'test'), str(HERE.parent)]
+sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE.parent)]
 
 from arm_rig import ArmRig, BAD_GOALS, diagnostic_values  # noqa: E402
 import numpy as np  # noqa: E402

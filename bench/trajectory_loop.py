@@ -20,7 +20,7 @@ import tempfile
 import time
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parent / 'test'), str(HERE)]
+sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE)]
 
 from arm_rig import ArmRig, diagnostic_values  # noqa: E402
 from control_msgs.action import FollowJointTrajectory  # noqa: E402

@@ -1,7 +1,7 @@
 """What the user waits for a goal through ROS: from its publication to the arm moving, and to
 the arm at rest where it stops.
 
-The real nodes (sim, planner, controller: ``test/arm_rig.py``'s ArmRig, the installed
+The real nodes (sim, planner, controller: ``test/rigs/arm_rig.py``'s ArmRig, the installed
 executables on a ROS domain of their own). For each move of the trajectory bench's suite the
 arm is first sent to the move's start and left to settle; then the goal is published and
 the sim's true state (``/sim/ground_truth``, its own stamps) is read:
@@ -23,7 +23,7 @@ import tempfile
 import time
 
 BENCH = Path(__file__).resolve().parent
-sys.path[:0] = [str(BENCH), str(BENCH.parent / 'test'), str(BENCH.parent)]
+sys.path[:0] = [str(BENCH), str(BENCH.parent / 'test' / 'rigs'), str(BENCH.parent)]
 
 import busy  # noqa: E402
 import numpy as np  # noqa: E402

@@ -1,12 +1,18 @@
 """Shared fixtures: the default arm, its controller settings and planner, and isolated ROS
-domains for process-level tests."""
+domains for process-level tests. The tests mirror the package: ``unit`` (pure modules),
+``node`` (a node in process), ``process`` (installed nodes as processes over DDS),
+``package`` (lint, docs, layers, the installed layout); what they share is in ``rigs``."""
 
 import dataclasses
+from pathlib import Path
+import sys
 
 import pytest
 
 from arm_control import config
 from arm_control.planning.planner import Planner
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / 'rigs'))
 
 
 @pytest.fixture(scope='session')

@@ -19,7 +19,7 @@ from arm_control.sysid.settings import SysIdConfig
 from arm_control.sysid.simulated import identification_run
 from arm_control.sysid.wpilog import ENTRIES, read_recording, read_wpilog
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
 PERIOD_S = 0.02
 
 

@@ -14,7 +14,7 @@ from arm_control.sysid.quality import assess, identified_values
 from arm_control.sysid.regressor import base_parameters, realise, with_values
 from arm_control.sysid.report import overlay_yaml, physical_uncertainty, plot_fit
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
 IDENTIFIED = {f'{joint}.{field}' for joint in ('shoulder', 'elbow')
               for field in ('mass_kg', 'com_from_joint_m', 'inertia_about_com_kgm2',
                             'viscous_friction_nm_s_per_rad', 'coulomb_friction_nm')}

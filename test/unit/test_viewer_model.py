@@ -101,7 +101,7 @@ def test_the_path_shown_is_the_arms_last_move_not_the_planning_ahead(model, kine
 
 
 def test_viewer_parameters_from_the_file():
-    params = read_parameter_file(Path(__file__).resolve().parents[1] / 'config' / 'arm.yaml',
+    params = read_parameter_file(Path(__file__).resolve().parents[2] / 'config' / 'arm.yaml',
                                  'viewer')
     viewer = ViewerConfig.from_parameters(params)
     assert viewer.rate_hz > 0 and viewer.png_rate_hz > 0 and viewer.headless is False

@@ -224,5 +224,5 @@ def check(goal=(1.1, 0.9)) -> dict:
 
 if __name__ == '__main__':
     if sys.argv[1:2] == ['check']:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'rigs'))
         print(json.dumps(check()), flush=True)

@@ -9,7 +9,7 @@ from catkin_pkg.package import parse_package
 import pytest
 from ros_harness import install_prefix
 
-SOURCE = Path(__file__).resolve().parents[1]
+SOURCE = Path(__file__).resolve().parents[2]
 EXECUTABLES = ('sim', 'controller', 'planner')
 
 

@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / 'arm_control'
 sys.path.insert(0, str(ROOT / 'scripts'))
 import draw_layers  # noqa: E402, I100

@@ -10,7 +10,7 @@ import pytest
 from arm_control.planning.planner import travel_rad
 
 
-FRC_FILE = Path(__file__).resolve().parents[1] / 'config' / 'frc_robot.yaml'
+FRC_FILE = Path(__file__).resolve().parents[2] / 'config' / 'frc_robot.yaml'
 CHECK_STEP_RAD = math.radians(0.1)          # every returned path is checked at this step
 
 

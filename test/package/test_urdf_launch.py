@@ -24,7 +24,7 @@ from arm_control.bringup import node_parameters
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.visual.urdf import arm_urdf, joint_limits
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 URDF = ROOT / 'urdf' / 'arm.urdf'
 LAUNCH = ROOT / 'launch' / 'arm.launch.py'
 

@@ -12,7 +12,7 @@ from arm_control.logs.recording import Recording, Sample
 from arm_control.visual.plots import plot_run, state_spans, tracking_error
 from arm_control.visual.scene import state_colour
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 STATES = ((0.0, 'waiting'), (0.5, 'planning'), (0.55, 'tracking'), (2.0, 'holding'))
 
 

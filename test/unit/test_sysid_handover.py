@@ -12,7 +12,7 @@ from arm_control.sysid.handover import HandOver, lowering, REMEMBERED, TAKE_OVER
 from arm_control.sysid.session import Session
 from arm_control.sysid.settings import SysIdConfig
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
 
 
 @pytest.fixture(scope='module')

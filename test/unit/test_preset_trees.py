@@ -14,7 +14,7 @@ from arm_control.planning.graph import ConfigurationGrid, DIRECTIONS
 from arm_control.planning.planner import Planner
 from arm_control.planning.trees import GoalTrees
 
-FRC_FILE = Path(__file__).resolve().parents[1] / 'config' / 'frc_robot.yaml'
+FRC_FILE = Path(__file__).resolve().parents[2] / 'config' / 'frc_robot.yaml'
 CHECK_STEP_RAD = math.radians(0.1)
 
 

@@ -16,7 +16,7 @@ from arm_control.sysid.excitation import (CHECK_STEP_S, design_excitation, DYNAM
                                           ExcitationRun, feedforward, per_motor_current_a)
 from arm_control.sysid.settings import SysIdConfig
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
 
 
 @pytest.fixture(scope='module')

@@ -9,7 +9,7 @@ import pytest
 from arm_control import config
 from arm_control.model.world import ForbiddenSpace, free_cells, FreeCells
 
-FRC_ROBOT = str(Path(__file__).resolve().parents[1] / 'config' / 'frc_robot.yaml')
+FRC_ROBOT = str(Path(__file__).resolve().parents[2] / 'config' / 'frc_robot.yaml')
 
 
 @pytest.mark.parametrize('files', [(), (FRC_ROBOT,)])

@@ -62,7 +62,7 @@ def test_with_no_arm_it_says_so_and_exits(domain):
 
 def test_scripts_arm_runs_the_same_tool_without_the_ros2_cli(domain):
     """From the two-command set-up (its .venv and install/), with no arm running."""
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     if not (root / '.venv' / 'bin' / 'python').exists() or not (root / 'install').is_dir():
         pytest.skip('the two-command set-up (scripts/setup.sh) has not run in this checkout')
     result = subprocess.run([str(root / 'scripts' / 'arm'), '--timeout', '1', 'state'],

@@ -8,7 +8,7 @@ import sys
 import pytest
 import yaml
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path[:0] = [str(ROOT / 'scripts'), str(ROOT / 'bench')]
 README = ROOT / 'README.md'
 MAX_README_LINES = 300

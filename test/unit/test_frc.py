@@ -22,7 +22,7 @@ from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.plant import ArmPlant
 from arm_control.parameters import ParameterError, read_parameter_file
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 # ---------------------------------------------------------------------- the contract

@@ -18,7 +18,7 @@ from arm_control.sysid.regressor import BASE_NAMES, base_parameters, regressor
 from arm_control.sysid.settings import SysIdConfig
 from arm_control.sysid.simulated import identification_run
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
 
 
 @pytest.fixture(scope='module')

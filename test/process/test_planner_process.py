@@ -17,7 +17,7 @@ from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.planner import Planner
 from arm_control.planning.poses import poses_from_waypoints, waypoints_from_poses
 
-FRC_FILE = Path(__file__).resolve().parents[1] / 'config' / 'frc_robot.yaml'
+FRC_FILE = Path(__file__).resolve().parents[2] / 'config' / 'frc_robot.yaml'
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
 START_Q = (math.pi / 2, -math.pi / 2)

@@ -10,7 +10,7 @@ from pathlib import Path
 import sys
 from xml.etree import ElementTree
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RUN_TIME = ('arm_control', 'launch')          # exec_depend
 TEST_TIME = ('test', 'bench', 'scripts')      # test_depend (or exec_depend)
 
@@ -64,7 +64,7 @@ PIP_ONLY = {
 }
 # Modules used with no import statement: (module, file, the text there that uses it).
 USED_BY_NAME = (
-    ('flake8', 'test/test_flake8.py', "'-m', 'flake8'"),
+    ('flake8', 'test/package/test_flake8.py', "'-m', 'flake8'"),
     ('flake8_import_order', 'setup.cfg', 'import-order-style'),
     ('flake8_quotes', 'setup.cfg', 'inline-quotes'),
     ('pytest_timeout', 'scripts/test.sh', '--timeout'),
