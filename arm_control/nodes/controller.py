@@ -205,11 +205,10 @@ class ControllerNode(Node):
                 now - latest[1] <= self.config.joint_state_timeout_s else missing
         encoder = fresh(self.encoders, (math.nan, math.nan))
         bus, supply_current = fresh(self.bus, (math.nan, math.nan))
-        # Taken at its stamp, when the sensors were read: timed at its arrival (4 ms later at
-        # the median) the estimate lagged the arm by that much motion, and the feedback drove
-        # the elbow up to 1.5 deg ahead on a 0.2 s hop (past its goal in 5 of 24 runs, 40-60 ms
-        # more to settle; 0 of 24 at the stamps). In simulated time the stamp is the clock's,
-        # which may not have reached it yet, or have jumped since.
+        # Taken at its stamp, when the sensors were read: timed at its arrival the estimate
+        # would lag the arm by the motion of the transit, and the feedback push it ahead. In
+        # simulated time the stamp is the clock's, which may not have reached it yet, or have
+        # jumped since.
         trusted = 0.0 <= age_s <= STAMP_TRUSTED_S or (
             self.loop.simulated() and abs(age_s) <= self.config.joint_state_timeout_s)
         taken = stamp if trusted else now
