@@ -438,7 +438,7 @@ class ControllerNode(Node):
     def on_shutdown(self) -> None:
         """The last word: sending profiles and powered, the last profile again (it ends at
         rest with its holding volts, so the robot holds the arm until a newer command);
-        else 0 V. Not STYLE's 0 V on exit: issue 39, a hand-over never drops the arm."""
+        else 0 V. Not 0 V on exit as a rule: a hand-over must never drop the arm."""
         self.loop.stop()
         with self.lock:
             last = self.last_command
