@@ -9,8 +9,8 @@ arrives ``command_lag_s`` later; a reading reaches it
 tick plus the lag (``volts``, the controller's ``command_mode: volts``), plain volts
 computed for the robot's next instant learned from the stamps (``volts_at_instant``), or a
 profile for that instant (``profile``); ``lag_jitter_ms``: each command arrives up to this
-much earlier or later than the controller expects (seeded), never before the one sent before. Physics on 1 ms steps;
-deterministic.
+much earlier or later than the controller expects (seeded), never before the one sent
+before (one publisher's messages keep their order). Physics on 1 ms steps; deterministic.
 """
 
 from dataclasses import replace
