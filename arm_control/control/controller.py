@@ -46,7 +46,7 @@ from arm_control.model.kinematics import TwoLinkKinematics
 # in all: an arm that cannot move still meets the tracking-error rule. Driven to catch up, it
 # brakes at the motors' limits with only the reserve; a start missed by one robot loop then
 # costs several. Slower than WAIT_MIN_SPEED_RAD_S the lag along the path is not read.
-WAIT_AFTER_PERIODS, WAIT_LIMIT_S = 0.25, 0.2
+WAIT_AFTER_PERIODS, WAIT_LIMIT_S = 0.35, 0.2
 WAIT_MIN_SPEED_RAD_S = 0.5
 
 
