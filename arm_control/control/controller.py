@@ -45,12 +45,12 @@ from arm_control.model.feedforward import PeriodFeedforward
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.text import quote
 
-# A planned motion waits for an arm late on it by more than a period (behind along its path:
-# its first commands held up, a weak start), by that lag less a period, at most WAIT_LIMIT_S
+# A planned motion waits for an arm late on it by over WAIT_AFTER_PERIODS periods (its first
+# command taken a robot loop late, a weak start), by that lag less those, at most WAIT_LIMIT_S
 # in all: an arm that cannot move still meets the tracking-error rule. Driven to catch up, it
-# reaches the plan's braking faster than the plan, at the motors' limits, with only the
-# reserve to brake it. Slower than WAIT_MIN_SPEED_RAD_S the lag along the path is not read.
-WAIT_LIMIT_S = 0.2
+# brakes at the motors' limits with only the reserve; a start missed by one robot loop then
+# costs several. Slower than WAIT_MIN_SPEED_RAD_S the lag along the path is not read.
+WAIT_AFTER_PERIODS, WAIT_LIMIT_S = 0.35, 0.2
 WAIT_MIN_SPEED_RAD_S = 0.5
 
 
@@ -301,7 +301,7 @@ class ArmController:
         if not moving.any():
             return
         lag_s = float(np.max((q_set - self.sensing.state[:2])[moving] / qd_set[moving]))
-        delay_s = min(lag_s - self.period_s, WAIT_LIMIT_S - self.waited_s,
+        delay_s = min(lag_s - WAIT_AFTER_PERIODS * self.period_s, WAIT_LIMIT_S - self.waited_s,
                       now_s - motion.begin_s)       # it stays the motion in charge
         if delay_s > 0.0:
             motion.delay(delay_s)

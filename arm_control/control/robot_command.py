@@ -41,9 +41,11 @@ from arm_control.model.profile import Profile, Setpoint
 
 AHEAD = 3                     # setpoints along the motion before the stop
 # A command is aimed at the robot's first instant at least this long after it is expected
-# to arrive: its compute and its way there vary, and a profile that comes after the instant
-# it was for is played a period late (its first setpoint missed), one that comes early waits.
-ARRIVAL_MARGIN_S = 0.003
+# to arrive: its compute and its way there vary. One that comes after the instant it was for
+# is played a period late (its first setpoint missed, and a motion it starts waits for the
+# arm: WAIT_AFTER_PERIODS in control/controller.py), so it costs the period a wider margin
+# would have cost whenever the instant fell within the margin.
+ARRIVAL_MARGIN_S = 0.001
 # Sending profiles, the controller ticks this long after each of the robot's instants: the
 # instant's reading has come, and the command reaches the robot well before the next one,
 # so every command acts one period after the reading it answers, whatever the phase.

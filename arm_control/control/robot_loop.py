@@ -9,8 +9,8 @@ arrives ``command_lag_s`` later; a reading reaches it
 tick plus the lag (``volts``, the controller's ``command_mode: volts``), plain volts
 computed for the robot's next instant learned from the stamps (``volts_at_instant``), or a
 profile for that instant (``profile``); ``lag_jitter_ms``: each command arrives up to this
-much earlier or later than the controller expects (seeded). Physics on 1 ms steps;
-deterministic.
+much earlier or later than the controller expects (seeded), never before the one sent
+before (one publisher's messages keep their order). Physics on 1 ms steps; deterministic.
 """
 
 from dataclasses import replace
@@ -135,4 +135,7 @@ class RobotLoop:
             if self.mode != 'volts_at_instant' else tuple(float(v) for v in volts)
         jitter = int(self.rng.integers(-self.jitter_ms, self.jitter_ms + 1)) if self.jitter_ms \
             else 0
-        self.commands.append((now_ms + max(self.lag_ms + jitter, 0), command))
+        arrives_ms = now_ms + max(self.lag_ms + jitter, 0)
+        if self.commands:            # one publisher's messages arrive in the order sent
+            arrives_ms = max(arrives_ms, self.commands[-1][0])
+        self.commands.append((arrives_ms, command))
