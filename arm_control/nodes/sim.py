@@ -68,9 +68,6 @@ MAX_CATCH_UP_S = 0.03
 LOCKSTEP_WAIT_S = 0.5
 # ... and begins no sooner than its wall time, less this (a timer's jitter).
 WALL_SLACK_S = 0.0002
-# SCHED_FIFO of the threads DDS receives the commands in, when the sim runs at real-time
-# priority: a command waiting behind busy processes acts a robot loop later than it arrived.
-RECEIVE_PRIORITY = 1
 
 
 class SimNode(Node):
@@ -133,14 +130,13 @@ class SimNode(Node):
             self.create_timer(1.0 / self.config.sim_time_factor, self.publish_diagnostics,
                               clock=self.wall_clock)
         else:                   # a timer's phase is that of its creation: on the robot loop,
+            now_s = self.now_s()    # read once: an instant may pass between two reads
             start_s = self.period_s if not self.robot_loop else \
-                self.instant_s(self.now_s()) + self.period_s - self.now_s()
+                max(self.instant_s(now_s) + self.period_s - now_s, 0.0)
             self.starter = self.create_timer(start_s, self.start_stepping)
             self.create_timer(1.0, self.publish_diagnostics)
         priority = self.config.realtime_priority
         self.priority_problem = realtime.raise_this_thread(priority)   # the one that steps
-        if priority:            # the DDS threads that receive the commands: above the busy
-            realtime.raise_dds_threads(RECEIVE_PRIORITY)      # processes, below the step
         self.get_logger().info(
             f'simulating the arm at {self.config.publish_rate_hz:g} Hz from '
             f'[{self.config.initial_position[0]:.3f}, {self.config.initial_position[1]:.3f}] rad'

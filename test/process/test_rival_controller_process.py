@@ -40,14 +40,20 @@ def test_the_later_controller_yields_and_takes_the_arm_when_the_first_goes(rig):
     log_dir.mkdir(exist_ok=True)
     second = rig._node_process('controller', rig.domain, (), log_dir)
     try:
-        assert rig.wait_said('yielded', STARTED_S, began), rig.event_log(began)
+        # Said once, maybe before the probe's subscription has matched the new node's
+        # (events are volatile): its own log says it too.
+        assert rig.spin_until(lambda: rig.said('yielded', began)
+                              or 'yielded (voltage_command)' in second.output(), STARTED_S), \
+            rig.event_log(began)
         yielded = time.monotonic()
         assert rig.spin_until(lambda: any(cause == 'voltage_command' for _, cause, _
                                           in rig.said('untrusted', began)), 10.0)
         rig.spin_for(WATCH_S)
         rate = commands_a_second(rig, yielded + 0.5, time.monotonic())
         side_by_side = moved_from(rig, held, began)
-        assert len(rig.said('yielded', began)) == 1, rig.event_log(began)     # one, not both
+        assert len(rig.said('yielded', began)) <= 1, rig.event_log(began)     # one, not both
+        assert second.output().count('yielded (voltage_command)') == 1
+        assert 'yielded (voltage_command)' not in first.output()
         assert rate < 1.3 * RATE_HZ, f'{rate:.0f} commands a second: both command'
         assert side_by_side < HELD_RAD, np.degrees(side_by_side)
 
