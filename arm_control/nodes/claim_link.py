@@ -1,6 +1,12 @@
 """The controller's claim to the arm on ROS: ``voltage_command_claim`` (std_msgs/Header,
 transient local, beside ``voltage_command``), said every ``CLAIM_EVERY_S`` once it is ready,
-and the claims of others heard (``control/commanders.py``: the earliest keeps the arm)."""
+and the claims of others heard (``control/commanders.py``: the earliest keeps the arm).
+
+Listen before commanding: a controller that, when it becomes ready, sees other claimers in
+the graph whose claims it has not heard yet sends nothing until it hears one or
+``CLAIM_EVERY_S`` passes (a live claimer says its claim that often, and transient local
+hands over the last at once). So a later controller yields before its first command rather
+than after a few."""
 
 import math
 import os
@@ -30,6 +36,8 @@ class ClaimLink:
         self.yielding = False           # this controller sends nothing: another has the arm
         self.disabled_to_yield = False  # its core disabled on yielding: enabled on taking over
         self.lock = threading.Lock()
+        self.listen_until_s = -math.inf  # wall s: silent until then, unless a claim is heard
+        self.node = node
         self.publisher = node.create_publisher(Header, TOPIC, LATCHED)
         node.create_subscription(Header, TOPIC, self.on_claim, LATCHED)
         node.create_timer(CLAIM_EVERY_S, self.say)
@@ -43,9 +51,26 @@ class ClaimLink:
     def ready(self) -> None:
         """It could command from now: claim the arm (once), and say so at once."""
         if self.commanders.mine is None:
+            now_s = time.time()
             with self.lock:
-                self.commanders.ready(time.time())
+                self.commanders.ready(now_s)
+                others = 0 if self.commanders.rivals else \
+                    self.node.count_publishers(TOPIC) - 1              # its own is one
+                if others > 0:
+                    self.listen_until_s = now_s + CLAIM_EVERY_S
+            if others > 0:
+                self.node.get_logger().info(
+                    f'{others} other claimer(s) of the arm on {TOPIC}: listening for their '
+                    f'claims for up to {CLAIM_EVERY_S:g} s before commanding')
             self.say()
+
+    def listening(self) -> bool:
+        """Other claimers were in the graph at ready and none has been heard yet."""
+        with self.lock:
+            if self.commanders.rivals or time.time() >= self.listen_until_s:
+                self.listen_until_s = -math.inf
+                return False
+            return True
 
     def say(self) -> None:
         mine = self.commanders.mine

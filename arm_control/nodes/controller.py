@@ -360,7 +360,8 @@ class ControllerNode(Node):
             said = (self.core.events.waiting or self.core.goals.plans.waiting
                     or self.core.state != self.last_state
                     or self.core.goals.queue.version != self.last_queue_version)
-            commanding = estimate is not None and not yields    # nothing before a reading
+            commanding = estimate is not None and not yields \
+                and not self.claims.listening()     # nothing before a reading or a claim
             if commanding:
                 self.last_command = self.commander.command(self.core, voltage, acts_s)
                 self.voltage_pub.publish(messages.voltage_command(self.last_command))
