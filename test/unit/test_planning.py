@@ -4,27 +4,14 @@ import dataclasses
 import math
 
 import numpy as np
-from planning_checks import assert_free_path, CHECK_STEP_RAD, FRC_FILE, highest_point_m, presets
+from planning_checks import assert_free_path, CHECK_STEP_RAD, highest_point_m, presets
 import pytest
 
-from arm_control import config
 from arm_control.config import PlannerConfig, Rectangle
 from arm_control.control.plan_caches import PresetAnswers
 from arm_control.control.plans import BranchRanking
 from arm_control.planning.planner import Planner
 from arm_control.planning.poses import poses_from_waypoints
-
-
-@pytest.fixture(scope='module')
-def frc():
-    """The competition robot's arm and a planner on it at the file's resolution (1°)."""
-    arm, planner_config = config.load('planner', FRC_FILE)
-    return Planner(arm, planner_config)
-
-
-@pytest.fixture(scope='module')
-def seed_planner(arm):
-    return Planner(arm, config.load('planner')[1])
 
 
 def test_grid_cells_lie_inside_the_joint_travel(frc):

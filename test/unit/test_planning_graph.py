@@ -17,18 +17,6 @@ from arm_control.planning.planner import Plan, Planner, travel_rad
 from arm_control.planning.poses import poses_from_waypoints, waypoints_from_poses
 
 
-@pytest.fixture(scope='module')
-def frc():
-    """The competition robot's arm and a planner on it at the file's resolution (1°)."""
-    arm, planner_config = config.load('planner', FRC_FILE)
-    return Planner(arm, planner_config)
-
-
-@pytest.fixture(scope='module')
-def seed_planner(arm):
-    return Planner(arm, config.load('planner')[1])
-
-
 _EDGES = {}
 
 
