@@ -6,10 +6,12 @@ in-process, seeded."""
 
 from pathlib import Path
 
+from conftest import with_joint
 import numpy as np
 import pytest
 
 from arm_control import config, parameters
+from arm_control.control.estimator import ArmEstimator
 from arm_control.control.robot_loop import RobotLoop
 from arm_control.model.dynamics import ArmDynamics, RK4_STABLE_STEP
 from arm_control.model.feedforward import PeriodFeedforward
@@ -85,3 +87,18 @@ def test_the_arm_with_friction_reaches_and_holds_the_tall_reach(demo, controller
     assert loop.core.goals.counts['reached'] == 1
     states = np.array([s for t, s in loop.history if t > 2.0])
     assert np.degrees(np.max(np.ptp(states[:, :2], axis=0))) < 0.5
+
+
+def test_the_estimator_predicts_an_arm_with_strong_friction_at_rest(demo):
+    """With 3x the demo arm's Coulomb friction (its stiffest rate ~1400 /s), the filter's
+    prediction at rest under the holding voltage stays at rest: no speed grows from a
+    nudge of 0.001 rad/s."""
+    sticky = with_joint(with_joint(demo, 'shoulder', coulomb_friction_nm=30.0), 'elbow',
+                        coulomb_friction_nm=15.0)
+    estimator = ArmEstimator(sticky, 1.0)
+    estimator.reset(TALL_REACH, (0.0, 0.0))
+    estimator._kf.x[2:4] = 0.001
+    holding = ArmDynamics(sticky).voltage_for(TALL_REACH, (0.0, 0.0), (0.0, 0.0))
+    for _ in range(50):
+        estimator.predict(holding, 0.02)
+    assert np.max(np.abs(estimator._kf.x[2:4])) < 0.001
