@@ -9,13 +9,15 @@ benchmark suite (``bench_trajectory.SUITE``) with each file -- true, identified,
 ``robot_clock.py`` runs it: profiles played at the robot loop's instants at phase 0,
 commands 4 ms late, physics on 1 ms steps; deterministic). Per move and file:
 
-- time: from the goal until within 1 deg of where the arm came to rest, for good
-  (``robot_clock.settled_s``), over the minimum under the electrical limits on the true arm
-  (``minimum_time.suite_minimums``; ``--no-minimum``: seconds);
+- time: from the goal, given once the arm is at rest at the start (``hold_until_at_rest``),
+  until within 1 deg of where the arm came to rest, for good (``robot_clock.settled_s``),
+  over the minimum under the electrical limits on the true arm
+  (``minimum_time.suite_minimums``; ``--no-minimum``: seconds); 'refused' when the goal
+  failed (no trajectory within the limits of the arm the file describes);
 - tracking: the largest distance of the true arm from the controller's setpoint at its
   ticks, from the goal until settled (deg, the larger joint), and the final error: how far
   the arm came to rest from the goal's configuration (deg);
-- the lowest point of either link (mm above the floor's level).
+- the lowest point of either link from the goal on (mm above the floor's level).
 
     python bench/bench_sysid_controller.py [--runs 1] [--arms bench/arms/a.yaml ...]
                                            [--moves 0,4] [--no-minimum] [--write-docs]
@@ -47,16 +49,37 @@ from arm_control.planning.planner import Planner  # noqa: E402
 from arm_control.sysid.settings import SysIdConfig  # noqa: E402
 
 HOLD_BEFORE_S = 0.5
+AT_REST_DEG = 0.05               # the start: the arm moved less than this over REST_FOR_S ...
+REST_FOR_S = 0.3
+HOLD_AT_MOST_S = 3.0             # ... held at most this long for it
 MOVE_TIMEOUT_S = 6.0
 FILES = ('true', 'identified', 'default')
 
 
 @dataclasses.dataclass
 class Move:
-    time_s: float
+    time_s: float                    # NaN: not settled, or refused
     tracking_deg: float
     final_deg: float
     lowest_mm: float
+    refused: bool = False            # the goal failed: no trajectory within the arm's limits
+    start_rest_deg: float = 0.0      # how far the arm moved over REST_FOR_S before the goal
+
+
+def hold_until_at_rest(loop) -> float:
+    """Hold at the start until the arm moved less than AT_REST_DEG over REST_FOR_S (in one
+    process it starts at 0 V and drops until the first command acts): a move is timed from
+    an arm at rest. Returns that movement (deg)."""
+    loop.run(HOLD_BEFORE_S)
+    window = round(REST_FOR_S * 1000.0)
+    moved = math.inf
+    for _ in range(round((HOLD_AT_MOST_S - HOLD_BEFORE_S) / 0.1) + 1):
+        q = np.array([s[:2] for _, s in loop.history[-window:]])
+        moved = math.degrees(float(np.max(np.ptp(q, axis=0))))
+        if moved < AT_REST_DEG:
+            break
+        loop.run(0.1)
+    return moved
 
 
 def run_move(model, truth, controller_config, planner, start_q, goal_xy, seed) -> Move:
@@ -71,14 +94,16 @@ def run_move(model, truth, controller_config, planner, start_q, goal_xy, seed) -
         setpoints.append((now_s, np.array(loop.core.setpoint[0], float)))
         return volts
     loop.core.step = recorded
-    loop.run(HOLD_BEFORE_S)
+    start_rest = hold_until_at_rest(loop)
     goal_s = loop.now_s
+    loop.lowest_m = math.inf         # the move's, not the start's drop
     loop.submit_goal(*goal_xy)
     loop.run(MOVE_TIMEOUT_S)
+    refused = loop.core.goals.counts['failed'] > 0
     times = np.array([t for t, _ in loop.history])
     q = np.array([s[:2] for _, s in loop.history])
     after = times >= goal_s
-    moved_s = settled_s(times[after], q[after], goal_s)
+    moved_s = math.nan if refused else settled_s(times[after], q[after], goal_s)
     until = goal_s + (moved_s if math.isfinite(moved_s) else MOVE_TIMEOUT_S)
     ticks = [(t, s) for t, s in setpoints if goal_s <= t <= until]
     true_q = np.column_stack([np.interp([t for t, _ in ticks], times, q[:, j])
@@ -86,7 +111,8 @@ def run_move(model, truth, controller_config, planner, start_q, goal_xy, seed) -
     tracking = np.max(np.abs(np.array([s for _, s in ticks]) - true_q))
     goal_q = loop.core.goals.goal_q
     final = (np.max(np.abs(q[-1] - goal_q)) if goal_q is not None else math.nan)
-    return Move(moved_s, math.degrees(tracking), math.degrees(final), 1000.0 * loop.lowest_m)
+    return Move(moved_s, math.degrees(tracking), math.degrees(final), 1000.0 * loop.lowest_m,
+                refused, start_rest)
 
 
 def fmt(value, spec='.2f') -> str:
@@ -118,24 +144,28 @@ def one_arm(path, default, settings, controller_config, moves, runs, use_minimum
               f'deg, per file: {" / ".join(heads)}', '',
               f'| move | {unit} | tracking deg | final deg |', '|---|---|---|---|']
     for k, (name, _, _) in enumerate(starts):
-        cells = [' / '.join(fmt(getattr(results[c][k], field)
-                                / (scale[k] if field == 'time_s' else 1.0), spec)
+        cells = [' / '.join('refused' if field == 'time_s' and results[c][k].refused
+                            else fmt(getattr(results[c][k], field)
+                                     / (scale[k] if field == 'time_s' else 1.0), spec)
                             for c in columns)
                  for field, spec in (('time_s', '.2f'), ('tracking_deg', '.2f'),
                                      ('final_deg', '.2f'))]
         lines.append(f'| {name} | ' + ' | '.join(cells) + ' |')
-    lines += ['', f'| file | settled | {unit}: worst | median | total s | tracking deg: '
-              'worst | median | final deg: worst | lowest mm |', '|---|---|---|---|---|---|---|'
-              '---|---|']
+    lines += ['', 'total s: over the moves the true file does not refuse', '',
+              f'| file | settled | refused | {unit}: worst | median | total s | '
+              'tracking deg: worst | median | final deg: worst | lowest mm |',
+              '|---|---|---|---|---|---|---|---|---|---|']
+    doable = [k for k, move in enumerate(results['true', 0]) if not move.refused]
     for column, head in zip(columns, heads):
         rows = results[column]
         ratios = [r.time_s / s for r, s in zip(rows, scale)]
         finite = [r for r in ratios if math.isfinite(r)]
         tracking = [r.tracking_deg for r in rows]
         lines.append(
-            f'| {head} | {len(finite)} of {len(rows)} | {fmt(max(finite, default=math.nan))} | '
+            f'| {head} | {len(finite)} of {len(rows)} | {sum(r.refused for r in rows)} | '
+            f'{fmt(max(finite, default=math.nan))} | '
             f'{fmt(statistics.median(finite) if finite else math.nan)} | '
-            f'{fmt(sum(r.time_s for r in rows))} | {fmt(max(tracking))} | '
+            f'{fmt(sum(rows[k].time_s for k in doable))} | {fmt(max(tracking))} | '
             f'{fmt(statistics.median(tracking))} | {fmt(max(r.final_deg for r in rows))} | '
             f'{min(r.lowest_mm for r in rows):.0f} |')
     lines.append('')

@@ -5,11 +5,11 @@ velocities, and each motor encoder's unknown zero z, the joint angle at which th
 read 0 (where the sim started or was last reset). Input u = [Va, Vb], the applied volts.
 
 Predict: x⁺ = x + ∫ f(x, u) dt with f = ``ArmDynamics.derivative`` (the very model the sim
-integrates), RK4 on substeps of at most ``MAX_SUBSTEP_S``; joints clamped at their hard
-stops as the plant does. Covariance P⁺ = F P Fᵀ + Q: F is the RK4 substeps' map of the
-linearised ẋ = A x, A = ∂f/∂x by finite differences at the start of the step; Q is
-piecewise-constant white acceleration of σ = ``process_noise_rad_s2`` per joint plus a slow
-random walk of the encoder zeros.
+integrates), RK4 on substeps of at most ``MAX_SUBSTEP_S``, and stable (``substep_s``);
+joints clamped at their hard stops as the plant does. Covariance P⁺ = F P Fᵀ + Q: F is the
+RK4 substeps' map of the linearised ẋ = A x, A = ∂f/∂x by finite differences at the start
+of the step; Q is piecewise-constant white acceleration of σ = ``process_noise_rad_s2`` per
+joint plus a slow random walk of the encoder zeros.
 
 Update, z = [potentiometers, reported velocities, encoders], each measurement linear in x:
 
@@ -39,8 +39,9 @@ import numpy as np
 from arm_control.config import ArmConfig
 from arm_control.model.dynamics import ArmDynamics, rk4
 
-# RK4 substep of the prediction: stable and accurate at the fastest mode (≈ −110 /s, the
-# elbow motor's back-EMF with the arm straight) where one 20 ms step would not be.
+# RK4 substep of the prediction: accurate at the fastest mode without friction (≈ −110 /s,
+# the elbow motor's back-EMF with the arm straight) where one 20 ms step would not be;
+# shorter where Coulomb friction makes the arm stiffer (``ArmDynamics.stable_step_s``).
 MAX_SUBSTEP_S = 0.005
 # A measurement this many predicted standard deviations off is not noise but a reset.
 RESET_GATE_SIGMA = 8.0
@@ -66,6 +67,7 @@ class ArmEstimator:
                 f'process_noise_rad_s2 must be positive, got {process_noise_rad_s2}')
         self.arm = arm
         self.dynamics = ArmDynamics(arm)
+        self.substep_s = self.dynamics.stable_step_s(MAX_SUBSTEP_S)
         self.process_noise_rad_s2 = float(process_noise_rad_s2)
         self._lower = np.array([j.min_angle_rad for j in arm.joints])
         self._upper = np.array([j.max_angle_rad for j in arm.joints])
@@ -118,7 +120,7 @@ class ArmEstimator:
             return self.dynamics.derivative(x, applied)
         joint = [float(v) for v in self._kf.x[:4]]
         u_pair = (float(u[0]), float(u[1]))
-        substeps = max(1, math.ceil(dt_s / MAX_SUBSTEP_S - 1e-9))
+        substeps = max(1, math.ceil(dt_s / self.substep_s - 1e-9))
         step_s = dt_s / substeps
         transition = np.eye(6)
         transition[:4, :4] = self._rk4_transition(derivative, joint, u_pair, step_s, substeps)

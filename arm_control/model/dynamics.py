@@ -28,6 +28,8 @@ from arm_control.model.motor import GearMotor
 
 # Coulomb friction is smoothed as c·tanh(ω/ω_s) so that RK4 sees a continuous function.
 COULOMB_SMOOTHING_RAD_S = 0.01
+# RK4 decays a mode ẋ = −λx only for h·λ below 2.785; steps keep h·λ within this.
+RK4_STABLE_STEP = 2.5
 
 
 def rk4(f, x, u, dt):
@@ -158,6 +160,24 @@ class ArmDynamics:
         kinetic = 0.5 * (m00 * x[2] ** 2 + 2.0 * m01 * x[2] * x[3] + m11 * x[3] ** 2)
         potential = self.g_upper * math.sin(x[0]) + self.g_fore * math.sin(x[0] + x[1])
         return kinetic + potential
+
+    def stiffest_rate_per_s(self, samples: int = 73) -> float:
+        """The fastest decay of the arm near rest, the largest λ of D v = λ M(θb) v over the
+        elbow's angle, D = diag(b + c/ω_s + e/k): Coulomb friction's slope c/ω_s at ω = 0,
+        viscous friction and the motors' back-EMF, each a damping (N m s/rad)."""
+        damping = self._b + self._c / COULOMB_SMOOTHING_RAD_S + self._e / self._k
+        fastest = 0.0
+        for elbow in np.linspace(-math.pi, math.pi, samples):
+            m00, m01, m11 = self._mass(elbow)
+            mass = np.array([[m00, m01], [m01, m11]])
+            fastest = max(fastest, float(np.max(np.real(np.linalg.eigvals(
+                np.linalg.solve(mass, np.diag(damping)))))))
+        return fastest
+
+    def stable_step_s(self, max_step_s: float) -> float:
+        """The longest RK4 step up to ``max_step_s`` with h·λ ≤ ``RK4_STABLE_STEP`` at the
+        stiffest rate: longer ones grow, not damp, the speed near rest."""
+        return min(float(max_step_s), RK4_STABLE_STEP / self.stiffest_rate_per_s())
 
     def free_speed_rad_s(self, voltage: float) -> np.ndarray:
         """Per joint, the speed at which ``voltage`` only balances the motors' back-EMF."""

@@ -53,7 +53,8 @@ class PeriodFeedforward:
         self.supply = PowerSupply(dynamics.arm, dynamics.motors)
         self.period_s = float(period_s)
         self.max_voltage = float(max_voltage)
-        self.substep_s = float(substep_s)
+        self.substep_s = dynamics.stable_step_s(substep_s)
+        self.newton_step_s = dynamics.stable_step_s(period_s)
         self.restart_rad = float(restart_rad)
         self.state = None               # the reference [θa, θb, ωa, ωb] at time_s
         self.time_s = -math.inf
@@ -117,9 +118,10 @@ class PeriodFeedforward:
         # The Newton step in the model alone: where the motor controllers would lower a
         # command, its column of the Jacobian vanishes and the other joint's volts would be
         # bent to make up for it through the coupling. One RK4 step a period is enough for
-        # the step (the reference itself moves on finer ones): half the loop's CPU.
+        # the step (the reference itself moves on finer ones) where it is stable: half the
+        # loop's CPU. Coulomb friction makes the arm stiff near rest (``stable_step_s``).
         ends = self._simulate(np.tile(self.state, (5, 1)), trials.reshape(5, 2, 2), period,
-                              applied=False, substep_s=period)
+                              applied=False, substep_s=self.newton_step_s)
         jacobian = (ends[1:] - ends[0]).T / delta
         try:
             guess = guess - np.linalg.solve(jacobian, ends[0] - target)
