@@ -10,7 +10,6 @@ arm was pushed there) first takes the shortest way out, to the nearest free cell
 the goal can be reached; only that first segment is not free.
 """
 
-from dataclasses import dataclass
 import math
 
 import numpy as np
@@ -18,21 +17,13 @@ import numpy as np
 from arm_control.config import ArmConfig, PlannerConfig
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
-from arm_control.planning.graph import ConfigurationGrid, segments_free
+from arm_control.planning.graph import ConfigurationGrid
+from arm_control.planning.plan import Plan
+from arm_control.planning.shortcut import COARSE_FACTOR, segment_is_free, shortcut
 from arm_control.planning.trees import GoalTrees
 
 # Lazily found blocked edges are cut and the search re-run at most this often per query.
 MAX_SEARCHES = 50
-# A segment is first sampled this many times more coarsely: most blocked ones fail there.
-COARSE_FACTOR = 10
-# ... and a shortcut candidate before that, this many times.
-SIGHT_FACTOR = 30
-# Shortcut candidates that pass the coarse check are checked finely, farthest first, this
-# many, each first at a step this many times coarser (a grazing segment fails there).
-MAX_FINE_CHECKS = 6
-MIDDLE_FACTOR = 3
-# At most this many corners ahead are tried from each kept waypoint.
-MAX_CANDIDATES = 24
 # The search first looks only this far (factor × the straight move's travel + margin), which
 # is exact when it finds the goal there, and everywhere otherwise.
 SEARCH_GUESS_FACTOR = 1.5
@@ -41,44 +32,6 @@ BRANCH_NAMES = ('elbow-positive', 'elbow-negative')
 # A start within this of a tree's goal on both joints (a robot resting on a preset, its pose
 # sent as a tool pose and back) plans from that tree.
 TREE_START_RAD = 1e-6
-
-
-@dataclass(frozen=True, eq=False)
-class Plan:
-    """A path in joint space, or the reason there is none.
-
-    Waypoints are continuous angles inside the joint travel, joined by straight segments
-    that never enter forbidden space -- except a start pushed into it (even past a hard
-    stop), whose first segment is the shortest way out.
-    """
-
-    waypoints_rad: np.ndarray   # (N, 2) start -> goal, continuous angles; (0, 2) when no plan
-    reason: str                 # '' on success, else a sentence a user understands
-    cost_rad: float             # Σ(|Δθa| + |Δθb|) along the waypoints (inf when no plan)
-
-    @property
-    def ok(self) -> bool:
-        return not self.reason
-
-    @classmethod
-    def failure(cls, reason: str) -> 'Plan':
-        return cls(np.zeros((0, 2)), reason, math.inf)
-
-    @classmethod
-    def through(cls, waypoints) -> 'Plan':
-        """A plan along ``waypoints``, repeated points dropped (no zero-length segments,
-        but always a start and a goal, equal when the arm is already there)."""
-        waypoints = np.array(waypoints, dtype=float).reshape(-1, 2)
-        moved = np.concatenate([[True], np.any(np.diff(waypoints, axis=0) != 0.0, axis=1)])
-        waypoints = waypoints[moved] if np.count_nonzero(moved) >= 2 else waypoints[[0, -1]]
-        waypoints.setflags(write=False)
-        return cls(waypoints, '', travel_rad(waypoints))
-
-
-def travel_rad(waypoints) -> float:
-    """Σ(|Δθa| + |Δθb|) along a polyline in joint space."""
-    waypoints = np.asarray(waypoints, dtype=float).reshape(-1, 2)
-    return float(np.abs(np.diff(waypoints, axis=0)).sum())
 
 
 def _degrees(q) -> str:
@@ -235,12 +188,8 @@ class Planner:
     # Search
 
     def segment_is_free(self, q_from, q_to, coarse_factor: float = COARSE_FACTOR) -> bool:
-        """``ForbiddenSpace.segment_is_free`` at ``check_step_rad``, after a pass at a
-        ``coarse_factor`` times coarser step that rejects most blocked segments for a
-        fraction of the cost (a forbidden sample is forbidden at any step)."""
-        step = self.forbidden.check_step_rad
-        coarse = self.forbidden.segment_is_free(q_from, q_to, coarse_factor * step)
-        return coarse and self.forbidden.segment_is_free(q_from, q_to, step)
+        """``shortcut.segment_is_free`` in free space."""
+        return segment_is_free(self.forbidden, q_from, q_to, coarse_factor)
 
     def _search(self, start: np.ndarray, goals: list[np.ndarray], each: bool = False):
         """[the plan to the cheapest of ``goals``], or with ``each`` a plan to each of them,
@@ -359,8 +308,8 @@ class Planner:
         """The plan along the grid path ``nodes``: from the start (or its way out) to the
         goal, shortcut."""
         middle = self.grid.configurations[nodes]
-        path = self._shortcut(np.vstack([middle, goal] if escape is not None
-                                        else [start, middle, goal]))
+        path = shortcut(self.forbidden, np.vstack([middle, goal] if escape is not None
+                                                  else [start, middle, goal]))
         if path is None:
             return Plan.failure('no connection: the grid path failed its final collision '
                                 'check; try a finer grid_resolution_rad')
@@ -375,42 +324,3 @@ class Planner:
             return None
         travel = np.abs(grid.configurations[candidates] - start).sum(axis=1)
         return int(candidates[np.argmin(travel)])
-
-    def _shortcut(self, path: np.ndarray) -> np.ndarray | None:
-        """Drop the waypoints a checked straight segment can skip.
-
-        From each kept waypoint, jump to the farthest corner of the grid path in sight: the
-        corners ahead (up to ``MAX_CANDIDATES``, evenly spread) are tried at once at a coarse
-        step (a forbidden sample is forbidden at any step), then the farthest that passed is
-        checked with ``ForbiddenSpace.segment_is_free`` at ``check_step_rad``, after a pass
-        at ``MIDDLE_FACTOR`` times that step. With none in sight, the next
-        grid step (checked when the grid path was found) is kept.
-        """
-        step = self.forbidden.check_step_rad
-        last = len(path) - 1
-        moves = np.diff(path, axis=0)
-        corners = np.flatnonzero(np.any(np.abs(np.diff(moves, axis=0)) > 1e-12, axis=1)) + 1
-        corners = np.append(corners, last)
-        kept, unchecked = [0], []
-        while kept[-1] < last:
-            anchor = kept[-1]
-            ahead = corners[corners > anchor + 1]
-            if len(ahead) > MAX_CANDIDATES:               # evenly spread, the last included
-                ahead = ahead[np.linspace(0, len(ahead) - 1, MAX_CANDIDATES).round().astype(int)]
-            for factor in (SIGHT_FACTOR, COARSE_FACTOR):     # coarsest first: cheap misses
-                ahead = ahead[segments_free(self.forbidden, np.broadcast_to(
-                    path[anchor], (len(ahead), 2)), path[ahead], factor * step)]
-            in_sight = ahead
-            chosen = anchor + 1
-            for corner in in_sight[::-1][:MAX_FINE_CHECKS]:
-                if self.segment_is_free(path[anchor], path[corner], MIDDLE_FACTOR):
-                    chosen = int(corner)
-                    break
-            if chosen == anchor + 1:
-                unchecked.append(anchor)
-            kept.append(chosen)
-        # The grid steps kept were checked with the same samples up to rounding; recheck them
-        # with the function a caller would use, and fall back to the whole grid path if not.
-        if all(self.forbidden.segment_is_free(path[a], path[a + 1], step) for a in unchecked):
-            return path[kept]
-        return path if self.forbidden.path_is_free(path, step) else None

@@ -13,7 +13,8 @@ from arm_control import config
 from arm_control.config import PlannerConfig
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.graph import ConfigurationGrid, DIRECTIONS
-from arm_control.planning.planner import Plan, Planner, travel_rad
+from arm_control.planning.plan import Plan, travel_rad
+from arm_control.planning.planner import Planner
 from arm_control.planning.poses import poses_from_waypoints, waypoints_from_poses
 
 
