@@ -154,7 +154,7 @@ def simulate(arm, controller_config, controller, on_goal, start_q, seed, hand_of
         if regular or plans is not None:
             if plans:
                 hand_off.deliver(now_s, plans)
-            plant.set_voltage(controller.step(now_s, plant.read()))
+            plant.set_voltage(controller.step(now_s, plant.read()).volts)
             if hand_off is not None:
                 hand_off.after_step(now_s)
         plant.advance(PHYSICS_MS / 1000.0)
@@ -186,7 +186,7 @@ class _Timed:
 
     def step(self, now_s, reading):
         began = time.thread_time()
-        voltage = self.controller.step(now_s, reading)
+        voltage = self.controller.step(now_s, reading).volts
         self.cpu_s.append(time.thread_time() - began)
         return voltage
 

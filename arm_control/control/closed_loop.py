@@ -62,7 +62,7 @@ class ClosedLoop:
         self.plant.advance(self.reading_age_s)
         reached = self.core.goals.counts['reached']
         acts_s = self.now + (self.command_delay_s if self.told_delay else 0.0)
-        voltage = self.core.step(acts_s, reading, read_s if self.told_age else self.now)
+        voltage = self.core.step(acts_s, reading, read_s if self.told_age else self.now).volts
         if self.core.goals.counts['reached'] > reached:
             self.arrivals.append((self.core.goals.goal_q.copy(), self.true_q,
                                   np.array(self.plant.state[2:])))

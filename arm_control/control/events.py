@@ -84,11 +84,13 @@ class EventLog:
         self._window_start_s = float('-inf')
         self._window_rejections = 0
         self._counted: dict[str, int] = {}        # reason -> rejections not said one by one
+        self.said = 0                               # events said so far
 
     def say(self, now_s: float, kind: EventKind, level: str, message: str,
             cause: str = '') -> Event:
         event = Event(now_s, kind, level, message, cause)
         self.history.append(event)
+        self.said += 1
         self._new.append(event)
         del self._new[:-HISTORY]
         return event
@@ -114,6 +116,11 @@ class EventLog:
                      f' s ({reasons})')
             self._counted = {}
         self._window_start_s, self._window_rejections = now_s, 0
+
+    def since(self, said: int) -> tuple[Event, ...]:
+        """The events said after the first ``said`` (as many as the history keeps)."""
+        count = min(self.said - said, len(self.history))
+        return tuple(self.history)[len(self.history) - count:] if count > 0 else ()
 
     @property
     def waiting(self) -> bool:

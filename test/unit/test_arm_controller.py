@@ -304,17 +304,17 @@ def test_a_preempting_goal_takes_over_the_moving_arm_smoothly(arm, controller_co
     rig.core.submit_preset(rig.now, 'back_score')
     rig.run(0.4)
     assert rig.core.state == ArmState.TRACKING
-    moving = np.abs(rig.core.setpoint[1])
+    moving = np.abs(rig.core.last_step.setpoint[1])
     assert np.max(moving) > 1.0                        # well under way
     rig.core.submit_preset(rig.now, 'floor_pickup')
-    previous = rig.core.setpoint
+    previous = rig.core.last_step.setpoint
     jumps, speed_jumps = [], []
     while rig.core.state != ArmState.HOLDING and rig.now < 10.0:
         rig.step()
-        q, qd, qdd = rig.core.setpoint
+        q, qd, qdd = rig.core.last_step.setpoint
         jumps.append(np.max(np.abs(q - previous[0] - previous[1] * rig.period_s)))
         speed_jumps.append(np.max(np.abs(qd - previous[1])))
-        previous = rig.core.setpoint
+        previous = rig.core.last_step.setpoint
     assert rig.core.state == ArmState.HOLDING
     assert rig.kinematics.forward(rig.true_q) == pytest.approx((1.2, 0.15), abs=0.03)
     # Position continues (within what one period of acceleration moves it) and so does
@@ -329,7 +329,7 @@ def test_cancel_brakes_along_the_path_and_holds(arm, controller_config, planner)
     rig.core.submit_preset(rig.now, 'back_score')
     rig.core.submit_preset(rig.now, 'stow', preempt=False)
     rig.run(0.4)
-    assert np.max(np.abs(rig.core.setpoint[1])) > 1.0
+    assert np.max(np.abs(rig.core.last_step.setpoint[1])) > 1.0
     ok, _ = rig.core.cancel(rig.now)
     assert ok and kinds(rig.core)[-1] == Kind.CANCELLED
     assert rig.core.state == ArmState.WAITING and rig.core.pending_goals() == []
