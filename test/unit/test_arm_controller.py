@@ -9,7 +9,7 @@ filter is in the loop; nothing here reads the true state except the assertions.
 import dataclasses
 import math
 
-from controller_rig import DEG, goal_q_error, kinds, reached, Rig, START
+from controller_rig import DEG, goal_q_error, kinds, reached, reading_at, Rig, START
 import numpy as np
 import pytest
 
@@ -206,6 +206,29 @@ def test_asynchronous_planning_round_trip(arm, controller_config, planner):
     rig.core.on_timed_plan(rig.now, timed)
     assert rig.core.state == ArmState.TRACKING
     assert rig.run(5.0, rig.in_state(ArmState.HOLDING))
+
+
+def test_a_step_is_one_value_with_its_events_and_the_plan_requests_waiting(
+        arm, controller_config):
+    """``step`` returns the volts with what they came from: the events said in that step
+    (no other), the plan requests waiting until ``take_news`` takes them, once."""
+    core = ArmController(arm, controller_config)
+    first = core.step(0.0, reading_at(START))
+    assert [e.kind for e in first.events] == [Kind.SENSORS_BACK] and not first.plan_requests
+    assert np.all(first.volts == core.voltage) and first.estimate is not None
+    core.submit_goal(0.01, 1.1, 0.9)
+    planning = core.step(0.02, reading_at(START))
+    assert planning.state == ArmState.PLANNING and planning.events == ()
+    (request,) = planning.plan_requests
+    assert planning.queue_version != first.queue_version
+    news = core.take_news()
+    assert news.plan_requests == (request,) and len(news.goals) == 1
+    assert [e.kind for e in news.events] == [Kind.SENSORS_BACK, Kind.GOAL_QUEUED]
+    assert core.step(0.04, reading_at(START)).plan_requests == ()
+    steps = [core.step(0.02 * k, None) for k in range(3, 40)]
+    lost = next(step for step in steps if step.events)
+    assert [e.kind for e in lost.events] == [Kind.SENSORS_LOST]
+    assert lost.unpowered and lost.state == ArmState.NO_SENSORS and not np.any(lost.volts)
 
 
 def test_a_goal_for_an_idle_arm_is_asked_for_at_once_and_the_next_waits_its_turn(
