@@ -154,7 +154,7 @@ def simulate(arm, controller_config, controller, on_goal, start_q, seed, hand_of
         if regular or plans is not None:
             if plans:
                 hand_off.deliver(now_s, plans)
-            plant.set_voltage(controller.step(now_s, plant.read()).volts)
+            plant.set_voltage(controller.step(now_s, plant.read()))
             if hand_off is not None:
                 hand_off.after_step(now_s)
         plant.advance(PHYSICS_MS / 1000.0)
@@ -178,8 +178,9 @@ def simulate(arm, controller_config, controller, on_goal, start_q, seed, hand_of
     return record
 
 
-class _Timed:
-    """A controller whose ``step`` CPU time is recorded."""
+class TimedCore:
+    """An ``ArmController`` as ``simulate`` drives a controller (``step`` gives [Va, Vb]),
+    the CPU time of each step recorded."""
 
     def __init__(self, controller):
         self.controller, self.cpu_s = controller, []
@@ -194,7 +195,7 @@ class _Timed:
 def run_ours(arm, controller_config, planner, start_q, goal_xy, seed, at_next_tick=False):
     core = ArmController(arm, controller_config)
     hand_off = PlanHandOff(core, planner, at_next_tick)
-    timed = _Timed(core)
+    timed = TimedCore(core)
     record = simulate(arm, controller_config, timed, lambda t: core.submit_goal(t, *goal_xy),
                       start_q, seed, hand_off)
     goal_q = core.goals.goal_q if core.goals.goal_q is not None else np.full(2, np.nan)

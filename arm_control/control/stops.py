@@ -33,8 +33,9 @@ class Stops:
         dropped = self.goals.drop()
         if self.machine.can(T.CANCEL):
             self.machine.fire(T.CANCEL)
-        return self._say(now_s, Kind.CANCELLED, 'info',
-                         f'cancelled: {dropped} goals dropped; holding')
+        message = f'cancelled: {dropped} goals dropped; holding'
+        self.events.say(now_s, Kind.CANCELLED, 'info', message, count=dropped)
+        return True, message
 
     def estop(self, now_s: float, reason: str = 'e-stop requested',
               cut_power: bool = False) -> tuple[bool, str]:

@@ -145,10 +145,10 @@ def test_a_stall_that_froze_the_arm_too_brakes_or_rejoins_then_reaches_the_goal(
         plant.set_voltage(core.step(plant.time_s + offset, plant.read()).volts)
         plant.advance(period_s)
         lowest.append(ForbiddenSpace(arm).lowest_point_m(np.array(plant.state[:2])[None])[0])
-    said = [str(e) for e in core.events.take()]
-    back = [e for e in said if e.startswith('sensors_back')]
+    said = core.events.take()
+    back = [e.message for e in said if e.kind == Kind.SENSORS_BACK]
     assert back and ('still on its plan' in back[-1] or 'planned again' in back[-1]), said
-    assert any(e.startswith('goal_reached') for e in said), said
+    assert Kind.GOAL_REACHED in [e.kind for e in said], said
     assert min(lowest) >= 0.0
 
 
@@ -173,10 +173,10 @@ def test_commands_lost_mid_move_then_the_arm_is_brought_back_not_dropped(arm, co
         plant.set_voltage(np.zeros(2) if step < round(0.3 / period_s) else voltage)
         plant.advance(period_s)
         lowest.append(ForbiddenSpace(arm).lowest_point_m(np.array(plant.state[:2])[None])[0])
-    said = [str(e) for e in core.events.take()]
+    said = core.events.take()
     assert core.state != ArmState.ESTOPPED, said
-    assert any(e.startswith('off_plan') for e in said), said
-    assert any(e.startswith('goal_reached: reached (-0.600, 1.500)') for e in said), said
+    assert Kind.OFF_PLAN in [e.kind for e in said], said
+    assert (Kind.GOAL_REACHED, (-0.6, 1.5)) in [(e.kind, e.goal_xy_m) for e in said], said
     assert min(lowest) >= 0.0
 
 
@@ -198,7 +198,7 @@ def test_a_move_whose_first_commands_are_held_up_waits_for_the_arm_and_keeps_off
             plant.set_voltage(voltage)
         plant.advance(period_s)
         lowest.append(ForbiddenSpace(arm).lowest_point_m(np.array(plant.state[:2])[None])[0])
-    said = [str(e) for e in core.events.take()]
-    reached = [e for e in said if e.startswith('goal_reached: reached (-1.700, 0.100)')]
-    assert reached and 'waiting for the arm' in reached[0], said
+    said = core.events.take()
+    assert (Kind.GOAL_REACHED, (-1.7, 0.1)) in [(e.kind, e.goal_xy_m) for e in said], said
+    assert core.goals.latency.waiting_for_the_arm_s > 0.0       # the last goal's, that one
     assert min(lowest) >= 0.0
