@@ -142,8 +142,8 @@ class ArmController:
             dropped = self.goals.drop()
             self.machine.fire(T.DRIVER_COMMAND)
             self.setpoints.drive(now_s, q, qd)
-            self._say(now_s, Kind.DRIVER, 'info', 'driver velocity mode' +
-                      (f': {dropped} goals dropped' if dropped else ''))
+            self.say(now_s, Kind.DRIVER, 'info', 'driver velocity mode' +
+                     (f': {dropped} goals dropped' if dropped else ''))
         self.setpoints.driver.command(now_s, vx_mps, vy_mps)
         return True, 'driver command accepted'
 
@@ -298,7 +298,7 @@ class ArmController:
         if self.state == S.DRIVER and self.setpoints.driver.idle(now_s):
             self.machine.fire(T.DRIVER_IDLE)
             self.setpoints.brake(now_s)
-            self._say(now_s, Kind.DRIVER_IDLE, 'info', 'driver commands stopped: holding')
+            self.say(now_s, Kind.DRIVER_IDLE, 'info', 'driver commands stopped: holding')
         self.goals.supervise(now_s, self.sensing.state)
 
     def _control(self, now_s: float, dt_s: float) -> np.ndarray:
@@ -315,8 +315,10 @@ class ArmController:
         sample = self.setpoints.sample(t_s)
         return (self._rest_q().copy(), np.zeros(2), np.zeros(2)) if sample is None else sample
 
-    def _say(self, now_s: float, kind: Kind, level: str, message: str) -> tuple[bool, str]:
-        self.events.say(now_s, kind, level, message)
+    def say(self, now_s: float, kind: Kind, level: str, message: str,
+            cause: str = '') -> tuple[bool, str]:
+        """An event from outside the core's rules (a setting changed, a controller yielded)."""
+        self.events.say(now_s, kind, level, message, cause)
         return True, message
 
     # ------------------------------------------------------------------ outputs

@@ -227,8 +227,8 @@ class ControllerNode(Node):
         self.plans.retune(settings.arm, settings.config)
         with self.lock:
             self.core.retune(settings.arm, settings.config, settings)
-            self.core.events.say(self.core_now_s(), Kind.PARAMETERS, 'info',
-                                 f'changed at run time: {", ".join(changed) or "nothing"}')
+            self.core.say(self.core_now_s(), Kind.PARAMETERS, 'info',
+                          f'changed at run time: {", ".join(changed) or "nothing"}')
         self.settings, self.arm, self.config = settings, settings.arm, settings.config
         self.outputs.trigger()
         return None

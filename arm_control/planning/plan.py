@@ -1,9 +1,24 @@
 """A planned path in joint space, or the reason there is none; its travel Σ(|Δθa| + |Δθb|)."""
 
 from dataclasses import dataclass
+from enum import Enum
 import math
+from typing import Optional
 
 import numpy as np
+
+
+class NoPlan(str, Enum):
+    """Why there is no plan."""
+
+    BAD_INPUT = 'bad_input'                 # a start or goal not finite
+    OUT_OF_REACH = 'out_of_reach'           # the goal point beyond the arm's annulus
+    FORBIDDEN_GOAL = 'forbidden_goal'       # the goal in forbidden space (on every branch)
+    SEPARATED = 'separated'                 # forbidden space parts the start from the goal
+    NO_CONNECTION = 'no_connection'         # the grid finds no way (narrow, boxed in, ...)
+
+    def __str__(self) -> str:
+        return self.value
 
 
 @dataclass(frozen=True, eq=False)
@@ -18,14 +33,15 @@ class Plan:
     waypoints_rad: np.ndarray   # (N, 2) start -> goal, continuous angles; (0, 2) when no plan
     reason: str                 # '' on success, else a sentence a user understands
     cost_rad: float             # Σ(|Δθa| + |Δθb|) along the waypoints (inf when no plan)
+    why: Optional[NoPlan] = None    # None on success
 
     @property
     def ok(self) -> bool:
         return not self.reason
 
     @classmethod
-    def failure(cls, reason: str) -> 'Plan':
-        return cls(np.zeros((0, 2)), reason, math.inf)
+    def failure(cls, reason: str, why: NoPlan) -> 'Plan':
+        return cls(np.zeros((0, 2)), reason, math.inf, why)
 
     @classmethod
     def through(cls, waypoints) -> 'Plan':

@@ -18,7 +18,7 @@ from arm_control.config import ArmConfig, PlannerConfig
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.graph import ConfigurationGrid
-from arm_control.planning.plan import Plan
+from arm_control.planning.plan import NoPlan, Plan
 from arm_control.planning.shortcut import COARSE_FACTOR, segment_is_free, shortcut
 from arm_control.planning.trees import GoalTrees
 
@@ -78,11 +78,11 @@ class Planner:
         goal_xy = np.asarray(goal_xy, dtype=float).ravel()
         if goal_xy.shape != (2,) or not np.all(np.isfinite(goal_xy)):
             return Plan.failure(f'the goal point must be two finite numbers (x, y), '
-                                f'got {goal_xy.tolist()}')
+                                f'got {goal_xy.tolist()}', NoPlan.BAD_INPUT)
         try:
             branches = self.kinematics.inverse(*goal_xy)
         except UnreachableError as error:
-            return Plan.failure(f'the goal is out of reach: {error}')
+            return Plan.failure(f'the goal is out of reach: {error}', NoPlan.OUT_OF_REACH)
         candidates = [self._in_travel(q) for q in branches]
         free = self.forbidden.is_free(np.array(candidates))
         goals = [goal for goal, ok in zip(candidates, free) if ok]
@@ -92,7 +92,7 @@ class Planner:
         if not goals:
             return Plan.failure(
                 f'the goal ({goal_xy[0]:.3f}, {goal_xy[1]:.3f}) m is forbidden on both elbow '
-                f'branches: {"; ".join(refusals)}')
+                f'branches: {"; ".join(refusals)}', NoPlan.FORBIDDEN_GOAL)
         return self._search(start, goals)[0]
 
     def plan_to_configuration(self, start_q, goal_q) -> Plan:
@@ -131,12 +131,12 @@ class Planner:
             goal_q = np.asarray(goal_q, dtype=float).ravel()
             if goal_q.shape != (2,) or not np.all(np.isfinite(goal_q)):
                 plans.append(Plan.failure(f'the goal configuration must be two finite angles, '
-                                          f'got {goal_q.tolist()}'))
+                                          f'got {goal_q.tolist()}', NoPlan.BAD_INPUT))
                 continue
             goal, why = self._goal(goal_q)
             if why is not None:
                 plans.append(Plan.failure(f'the goal configuration {_degrees(goal_q)} is '
-                                          f'forbidden: {why}'))
+                                          f'forbidden: {why}', NoPlan.FORBIDDEN_GOAL))
                 continue
             plans.append(None)
             goals.append(goal)
@@ -178,7 +178,7 @@ class Planner:
         start = np.asarray(start_q, dtype=float).ravel()
         if start.shape != (2,) or not np.all(np.isfinite(start)):
             return Plan.failure(f'the start configuration must be two finite angles, '
-                                f'got {start.tolist()}')
+                                f'got {start.tolist()}', NoPlan.BAD_INPUT)
         return self._in_travel(start)
 
     def _goal(self, q) -> tuple[np.ndarray, str | None]:
@@ -215,7 +215,8 @@ class Planner:
                   for members in groups]
         narrow = Plan.failure(
             'no connection: the free space around the goal is narrower than the planner grid '
-            f'({math.degrees(grid.resolution_rad):.2f} deg); try a finer grid_resolution_rad')
+            f'({math.degrees(grid.resolution_rad):.2f} deg); try a finer grid_resolution_rad',
+            NoPlan.NO_CONNECTION)
         plans = [plan or (None if labels[g] else narrow) for g, plan in enumerate(plans)]
         open_groups = [g for g, plan in enumerate(plans) if plan is None]
         if not open_groups:
@@ -226,7 +227,7 @@ class Planner:
             if len(source_nodes) == 0:
                 boxed = Plan.failure(
                     f'no connection: the start {_degrees(start)} is boxed in by forbidden '
-                    'space closer than the planner grid reaches')
+                    'space closer than the planner grid reaches', NoPlan.NO_CONNECTION)
                 return [plan or boxed for plan in plans]
         else:
             escape = self._way_out(start, set().union(*(labels[g] for g in open_groups)))
@@ -234,14 +235,14 @@ class Planner:
                 trapped = Plan.failure(
                     f'no connection: the start {_degrees(start)} is in forbidden space '
                     f'({self.forbidden.why_forbidden(start)}) and no free configuration '
-                    'connected to the goal exists')
+                    'connected to the goal exists', NoPlan.NO_CONNECTION)
                 return [plan or trapped for plan in plans]
             source_nodes = np.array([escape])
             source_costs = np.abs(grid.configurations[escape] - start).sum(keepdims=True)
         source_labels = {int(label) for label in grid.components[source_nodes]}
         separated = Plan.failure(
             f'no connection: forbidden space separates the start {_degrees(start)} from the '
-            'goal; no collision-free path joins them')
+            'goal; no collision-free path joins them', NoPlan.SEPARATED)
         for g in open_groups:
             if not labels[g] & source_labels:
                 plans[g] = separated
@@ -285,7 +286,7 @@ class Planner:
         except RuntimeError:
             blocked = Plan.failure('no connection found: too many grid edges turned out '
                                    'blocked by thin forbidden regions; try a finer '
-                                   'grid_resolution_rad')
+                                   'grid_resolution_rad', NoPlan.NO_CONNECTION)
             return [plan or blocked for plan in plans]
         for g, result in zip(open_groups, found):
             if result is None:
@@ -312,7 +313,7 @@ class Planner:
                                                   else [start, middle, goal]))
         if path is None:
             return Plan.failure('no connection: the grid path failed its final collision '
-                                'check; try a finer grid_resolution_rad')
+                                'check; try a finer grid_resolution_rad', NoPlan.NO_CONNECTION)
         return Plan.through(path if escape is None else np.vstack([start, path]))
 
     def _way_out(self, start: np.ndarray, labels: set[int]) -> int | None:
