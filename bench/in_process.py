@@ -198,7 +198,8 @@ def run_ours(arm, controller_config, planner, start_q, goal_xy, seed, at_next_ti
     timed = TimedCore(core)
     record = simulate(arm, controller_config, timed, lambda t: core.submit_goal(t, *goal_xy),
                       start_q, seed, hand_off)
-    goal_q = core.goals.goal_q if core.goals.goal_q is not None else np.full(2, np.nan)
+    final = core.last_step
+    goal_q = final.goal_q if final and final.goal_q is not None else np.full(2, np.nan)
     run = measure(arm, controller_config, record, goal_q, start_q)
     last = core.goals.plans.last
     if last is not None and last.ok:

@@ -215,7 +215,7 @@ class ArmController:
                               tracking.setpoint, tracking.tracking_error_rad,
                               tracking.feedforward_v, tracking.feedback_v,
                               self.events.since(said), self.goals.plans.requests,
-                              self.goals.queue.version)
+                              self.goals.queue.version, self.goals.goal_q)
         return self.last_step
 
     def _volts(self, now_s: float, reading, reading_time_s, earlier) -> np.ndarray:

@@ -31,6 +31,7 @@ class Step:
     events: tuple[Event, ...]             # said during this step (still in the log to take)
     plan_requests: tuple[PlanRequest, ...]    # waiting to be sent (``take_news`` takes them)
     queue_version: int                    # changes whenever the goal queue does
+    goal_q: Optional[np.ndarray]          # where the goal's motion ends, rad; None: no goal
 
 
 @dataclass(frozen=True)

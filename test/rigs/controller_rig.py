@@ -31,7 +31,7 @@ def reached(core):
 
 
 def goal_q_error(rig):
-    return np.abs(rig.true_q - rig.core.goals.goal_q)
+    return np.abs(rig.true_q - rig.core.last_step.goal_q)
 
 
 def reading_at(q, velocity=(0.0, 0.0)):
