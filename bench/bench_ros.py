@@ -56,7 +56,7 @@ from arm_rig import ArmRig  # noqa: E402
 from bench_trajectory import SUITE  # noqa: E402
 import busy  # noqa: E402
 from geometry_msgs.msg import PointStamped  # noqa: E402
-from in_process import PlanHandOff, simulate  # noqa: E402
+from in_process import PlanHandOff, simulate, TimedCore  # noqa: E402
 import minimum_time  # noqa: E402
 import numpy as np  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
@@ -196,8 +196,9 @@ def tracking_deg(truth, setpoints) -> float:
 def in_process_s(arm, controller_config, planner, start_q, goal_xy, seed) -> float:
     """The same move in one process, timed as through ROS."""
     core = ArmController(arm, controller_config)
-    record = simulate(arm, controller_config, core, lambda t: core.submit_goal(t, *goal_xy),
-                      start_q, seed, PlanHandOff(core, planner))
+    record = simulate(arm, controller_config, TimedCore(core),
+                      lambda t: core.submit_goal(t, *goal_xy), start_q, seed,
+                      PlanHandOff(core, planner))
     times, states = np.array(record['time']), np.array(record['state'])
     return settled_s(times, states[:, :2], 0.0)
 

@@ -127,9 +127,10 @@ def run_suite(controller_arm, truth, controller_config, planner, moves):
         core = ArmController(controller_arm, controller_config)
         hand_off = in_process.PlanHandOff(core, planner)
         record = in_process.simulate(
-            controller_arm, controller_config, core, lambda t: core.submit_goal(t, *goal_xy),
-            start_q, index, hand_off, plant_arm=truth)
-        goal_q = core.goals.goal_q if core.goals.goal_q is not None else np.full(2, np.nan)
+            controller_arm, controller_config, in_process.TimedCore(core),
+            lambda t: core.submit_goal(t, *goal_xy), start_q, index, hand_off, plant_arm=truth)
+        last = core.last_step
+        goal_q = last.goal_q if last and last.goal_q is not None else np.full(2, np.nan)
         rows.append((name, in_process.measure(truth, controller_config, record, goal_q, start_q)))
         traces.append(tuple(np.array(record[key]) for key in ('time', 'state', 'voltage')))
     return rows, traces

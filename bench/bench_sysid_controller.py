@@ -91,7 +91,7 @@ def run_move(model, truth, controller_config, planner, start_q, goal_xy, seed) -
 
     def recorded(now_s, *args, **kwargs):
         volts = step(now_s, *args, **kwargs)
-        setpoints.append((now_s, np.array(loop.core.setpoint[0], float)))
+        setpoints.append((now_s, np.array(loop.core.last_step.setpoint[0], float)))
         return volts
     loop.core.step = recorded
     start_rest = hold_until_at_rest(loop)

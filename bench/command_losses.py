@@ -48,7 +48,7 @@ def one_run(arm, controller, planner_config, start_xy, goal_xy, into_s, lost_s):
     core.events.take()
     q = []
     for step in range(round(4.0 / period_s)):
-        voltage = core.step(plant.time_s, plant.read())
+        voltage = core.step(plant.time_s, plant.read()).volts
         plant.set_voltage(np.zeros(2) if step < round(lost_s / period_s) else voltage)
         plant.advance(period_s)
         q.append(plant.state[:2])

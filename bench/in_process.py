@@ -178,15 +178,16 @@ def simulate(arm, controller_config, controller, on_goal, start_q, seed, hand_of
     return record
 
 
-class _Timed:
-    """A controller whose ``step`` CPU time is recorded."""
+class TimedCore:
+    """An ``ArmController`` as ``simulate`` drives a controller (``step`` gives [Va, Vb]),
+    the CPU time of each step recorded."""
 
     def __init__(self, controller):
         self.controller, self.cpu_s = controller, []
 
     def step(self, now_s, reading):
         began = time.thread_time()
-        voltage = self.controller.step(now_s, reading)
+        voltage = self.controller.step(now_s, reading).volts
         self.cpu_s.append(time.thread_time() - began)
         return voltage
 
@@ -194,10 +195,11 @@ class _Timed:
 def run_ours(arm, controller_config, planner, start_q, goal_xy, seed, at_next_tick=False):
     core = ArmController(arm, controller_config)
     hand_off = PlanHandOff(core, planner, at_next_tick)
-    timed = _Timed(core)
+    timed = TimedCore(core)
     record = simulate(arm, controller_config, timed, lambda t: core.submit_goal(t, *goal_xy),
                       start_q, seed, hand_off)
-    goal_q = core.goals.goal_q if core.goals.goal_q is not None else np.full(2, np.nan)
+    final = core.last_step
+    goal_q = final.goal_q if final and final.goal_q is not None else np.full(2, np.nan)
     run = measure(arm, controller_config, record, goal_q, start_q)
     last = core.goals.plans.last
     if last is not None and last.ok:

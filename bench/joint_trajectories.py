@@ -48,7 +48,7 @@ def run(arm, controller, goals, end, seconds, count, full):
     loop = ClosedLoop(arm, controller, seed=0)
     loop.run(0.5)
     core = loop.core
-    rows = moveit_style(core.setpoint[0], end, seconds, count)
+    rows = moveit_style(core.last_step.setpoint[0], end, seconds, count)
     if not full:
         rows = [row[:2] for row in rows]
     try:

@@ -80,7 +80,7 @@ def closed_loop_run(params_files=(), goal_names=None, duration_s: float = 30.0,
         if reached and math.isnan(run.goals[reached - 1][3]):
             run.goals[reached - 1][3] = now
         state = str(core.state)
-        setpoint = tuple(float(v) for v in core.setpoint[0])
+        setpoint = tuple(float(v) for v in core.last_step.setpoint[0])
         run.samples.append(Sample(
             time_s=now, measured_rad=tuple(reading.potentiometer_rad),
             true_rad=tuple(reading.true_state[:2]), setpoint_rad=setpoint,

@@ -11,6 +11,7 @@ import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.controller import ArmController
+from arm_control.control.events import EventKind
 from arm_control.control.state_machine import ArmState
 from arm_control.model.plant import ArmPlant
 from arm_control.model.world import ForbiddenSpace
@@ -60,11 +61,11 @@ class ClosedLoop:
         if reading is None and self.sensors_on:
             reading = self.plant.read()
         self.plant.advance(self.reading_age_s)
-        reached = self.core.goals.counts['reached']
         acts_s = self.now + (self.command_delay_s if self.told_delay else 0.0)
-        voltage = self.core.step(acts_s, reading, read_s if self.told_age else self.now)
-        if self.core.goals.counts['reached'] > reached:
-            self.arrivals.append((self.core.goals.goal_q.copy(), self.true_q,
+        step = self.core.step(acts_s, reading, read_s if self.told_age else self.now)
+        voltage = step.volts
+        if any(event.kind == EventKind.GOAL_REACHED for event in step.events):
+            self.arrivals.append((step.goal_q.copy(), self.true_q,
                                   np.array(self.plant.state[2:])))
         self.voltages.append(voltage)
         for observer in self.observers:

@@ -10,6 +10,7 @@ frame) is quoted by ``arm_control.text.quote``: at most a short prefix, with the
 from collections import deque
 from dataclasses import dataclass
 from enum import Enum
+from typing import Optional
 
 REJECTIONS_PER_WINDOW = 20
 WINDOW_S = 1.0
@@ -61,6 +62,8 @@ class Event:
     level: str          # 'info', 'warning' (a goal rejected or failed), 'error' (e-stop)
     message: str
     cause: str = ''     # a few words to count and test by ('out of reach', 'queue full', ...)
+    goal_xy_m: Optional[tuple[float, float]] = None    # the goal it is about, in arm_base
+    count: int = 0      # how many: goals rejected in a window, goals dropped
 
     def __str__(self) -> str:
         """As published: 'kind: sentence', or 'kind (cause): sentence'."""
@@ -84,11 +87,14 @@ class EventLog:
         self._window_start_s = float('-inf')
         self._window_rejections = 0
         self._counted: dict[str, int] = {}        # reason -> rejections not said one by one
+        self.said = 0                               # events said so far
 
     def say(self, now_s: float, kind: EventKind, level: str, message: str,
-            cause: str = '') -> Event:
-        event = Event(now_s, kind, level, message, cause)
+            cause: str = '', goal_xy_m: Optional[tuple[float, float]] = None,
+            count: int = 0) -> Event:
+        event = Event(now_s, kind, level, message, cause, goal_xy_m, count)
         self.history.append(event)
+        self.said += 1
         self._new.append(event)
         del self._new[:-HISTORY]
         return event
@@ -111,9 +117,14 @@ class EventLog:
             reasons = '; '.join(f'{count} {reason}' for reason, count in self._counted.items())
             self.say(now_s, EventKind.GOALS_REJECTED, 'warning',
                      f'{total} more goals rejected in the last {now_s - self._window_start_s:.1f}'
-                     f' s ({reasons})')
+                     f' s ({reasons})', count=total)
             self._counted = {}
         self._window_start_s, self._window_rejections = now_s, 0
+
+    def since(self, said: int) -> tuple[Event, ...]:
+        """The events said after the first ``said`` (as many as the history keeps)."""
+        count = min(self.said - said, len(self.history))
+        return tuple(self.history)[len(self.history) - count:] if count > 0 else ()
 
     @property
     def waiting(self) -> bool:

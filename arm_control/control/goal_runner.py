@@ -92,10 +92,10 @@ class GoalRunner:
             extra = f'; {dropped} earlier goals dropped' if dropped else ''
             if self.machine.can(T.GOAL) and not self.waiting_for_planner:
                 self.start(now_s, goal, rest_q)
-                return self._accept(now_s, Kind.GOAL_ACCEPTED,
+                return self._accept(now_s, Kind.GOAL_ACCEPTED, goal,
                                     f'goal {goal.label} accepted{note}: going there now{extra}')
             self.queue.append(goal)
-            return self._accept(now_s, Kind.GOAL_ACCEPTED,
+            return self._accept(now_s, Kind.GOAL_ACCEPTED, goal,
                                 f'goal {goal.label} accepted{note}: next{extra}{self._wait()}')
         if self.queue.full:
             return self.reject(now_s, f'goal {goal.label} rejected: the queue is full '
@@ -103,9 +103,9 @@ class GoalRunner:
                                       'queued goals are kept', 'the queue full')
         self.queue.append(goal)
         self.counts['queued'] += 1
-        said = self._accept(now_s, Kind.GOAL_QUEUED, f'goal {goal.label} queued{note} '
-                                                     f'({len(self.queue.waiting)} waiting)'
-                                                     f'{self._wait()}')
+        said = self._accept(now_s, Kind.GOAL_QUEUED, goal, f'goal {goal.label} queued{note} '
+                                                           f'({len(self.queue.waiting)} waiting)'
+                                                           f'{self._wait()}')
         if self._ready_for_next(now_s):     # planned now, not half a period later on average
             self.start(now_s, self.queue.start_next(), rest_q, from_queue=True)
         return said
@@ -128,8 +128,8 @@ class GoalRunner:
             self.machine.fire(T.GOAL_FAILED)
         return False, message
 
-    def _accept(self, now_s: float, kind: Kind, message: str) -> tuple[bool, str]:
-        self.events.say(now_s, kind, 'info', message)
+    def _accept(self, now_s: float, kind: Kind, goal, message: str) -> tuple[bool, str]:
+        self.events.say(now_s, kind, 'info', message, goal_xy_m=goal.xy)
         return True, message
 
     # ------------------------------------------------------------------ the goal in hand
@@ -165,7 +165,7 @@ class GoalRunner:
         self.goal_q = motion.final_q
         self.machine.fire(T.PLAN_READY)
         self.latency = GoalLatency(trajectory_s=motion.end_s - motion.begin_s)
-        return self._accept(now_s, Kind.GOAL_ACCEPTED, f'{goal.label} accepted{goal.note}' +
+        return self._accept(now_s, Kind.GOAL_ACCEPTED, goal, f'{goal.label} accepted{goal.note}' +
                             (f'; {dropped} earlier goals dropped' if dropped else ''))
 
     def ask(self, now_s: float, goal: Goal, rest_q, lead_s: Optional[float] = None) -> None:
@@ -255,7 +255,8 @@ class GoalRunner:
         if self.machine.can(T.PLAN_FAILED):
             self.machine.fire(T.PLAN_FAILED)
         self.last_error = f'goal {goal.label if goal else ""} failed: {reason}'
-        self.events.say(now_s, Kind.GOAL_FAILED, 'warning', self.last_error)
+        self.events.say(now_s, Kind.GOAL_FAILED, 'warning', self.last_error,
+                        goal_xy_m=goal.xy if goal else None)
 
     def planner_seen(self, now_s: float, available: bool) -> None:
         """Say when the planner comes or goes: a goal sent before it first comes waits for it
@@ -322,7 +323,8 @@ class GoalRunner:
                          self.latency.items())
         self.events.say(now_s, Kind.GOAL_REACHED, 'info',
                         f'reached {goal.label} {now_s - self.plans.started_s:.2f} s after '
-                        f'starting it (error {error[0]:+.2f}, {error[1]:+.2f} deg; {went})')
+                        f'starting it (error {error[0]:+.2f}, {error[1]:+.2f} deg; {went})',
+                        goal_xy_m=goal.xy)
 
     def interrupt(self) -> None:
         """The arm stopped under the goal (sensors lost, moved): it goes first again."""

@@ -32,8 +32,9 @@ def diagnostics(core, now_s: float) -> dict:
         'bus voltage (V)': f'{core.sensing.bus_voltage:.2f}',
         'last error': core.last_error,
         'voltage (V)': [round(float(v), 3) for v in core.voltage],
-        'tracking error (deg)': [round(math.degrees(e), 3) for e in core.tracking_error_rad],
-        'e-stops': core.estops,
+        'tracking error (deg)': [round(math.degrees(e), 3)
+                                 for e in core.tracking.tracking_error_rad],
+        'e-stops': core.stops.estops,
         **{f'goals {k}': v for k, v in core.goals.counts.items()},
         **{f'last goal: {k} (ms)': f'{1000 * v:.1f}' for k, v in core.goals.latency.items()},
     }

@@ -243,9 +243,9 @@ class PlanHandoff:
         self.pending, self._outbox = request, [request]
 
     @property
-    def waiting(self) -> bool:
+    def requests(self) -> tuple[PlanRequest, ...]:
         """Requests not yet taken."""
-        return bool(self._outbox)
+        return tuple(self._outbox)
 
     def take(self) -> list[PlanRequest]:
         """Requests to send to the planner (each once)."""

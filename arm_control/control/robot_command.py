@@ -165,11 +165,11 @@ def profile_ahead(core, start_s: float, step_s: float) -> Profile:
     share = core.config.robot_feedback_share
     gains = tuple((share * kp, share * kd) for kp, _, kd in (core.config.shoulder_pid,
                                                              core.config.elbow_pid))
-    integral = np.array(core.pid.integral_v)
-    proportional_derivative = np.asarray(core.feedback_v) - integral
-    reference = core.feedforward.state
+    integral = np.array(core.tracking.pid.integral_v)
+    proportional_derivative = np.asarray(core.tracking.feedback_v) - integral
+    reference = core.tracking.feedforward.state
     first = Setpoint(tuple(map(float, reference[:2])), tuple(map(float, reference[2:])),
-                     tuple(map(float, core.feedforward_v + integral
+                     tuple(map(float, core.tracking.feedforward_v + integral
                                + (1.0 - share) * proportional_derivative)))
     stop_s = start_s + AHEAD * step_s
     stop = core.setpoints.stopping(stop_s)
@@ -184,9 +184,9 @@ def profile_ahead(core, start_s: float, step_s: float) -> Profile:
     samples = [sample(t) for t in times]
     middles = [sample(t + 0.5 * step_s) for t in times]
     middles[-1] = samples[-1] = (stop.final_q, np.zeros(2), np.zeros(2))   # held, at rest
-    volts = core.feedforward.dynamics.voltages(*(np.array(v) for v in zip(*middles)))
+    volts = core.tracking.feedforward.dynamics.voltages(*(np.array(v) for v in zip(*middles)))
     if AHEAD > 1:                            # setpoint 1: the step's next period
-        volts[0] = core.feedforward.next_voltage + (1.0 - share) * proportional_derivative
+        volts[0] = core.tracking.feedforward.next_voltage + (1.0 - share) * proportional_derivative
     rest = [Setpoint(tuple(map(float, q)), tuple(map(float, qd)), tuple(map(float, v + integral)))
             for (q, qd, _), v in zip(samples, volts)]
     return Profile(float(start_s), float(step_s), gains, (first, *rest))

@@ -130,7 +130,7 @@ class RobotLoop:
         arrives_s = (now_ms + self.lag_ms) / 1000.0
         acts_s = self.commander.acts_s(arrives_s) if self.mode != 'volts_at_instant' \
             else self.clock.acting_at(arrives_s)
-        volts = self.core.step(acts_s, reading, stamp_s)
+        volts = self.core.step(acts_s, reading, stamp_s).volts
         command = self.commander.command(self.core, volts, acts_s) \
             if self.mode != 'volts_at_instant' else tuple(float(v) for v in volts)
         jitter = int(self.rng.integers(-self.jitter_ms, self.jitter_ms + 1)) if self.jitter_ms \

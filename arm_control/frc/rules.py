@@ -30,6 +30,9 @@ class LinkEvent:
     level: str
     message: str
     controller_enabled: bool | None
+    previous: LinkState | None = None       # the state it left (connecting: found; lost: back)
+    silent_s: float | None = None           # lost: how long no reading had come (awake time)
+    nt_connected: bool | None = None        # lost: whether NT still reported the connection
 
 
 class RobotLink:
@@ -85,12 +88,12 @@ class RobotLink:
             return None
         prefix = {LinkState.CONNECTING: 'robot found, ',
                   LinkState.LOST: 'robot back, '}.get(self.state, 'robot ')
-        self.state = state
+        previous, self.state = self.state, state
         if state == LinkState.ENABLED:
             return LinkEvent(state, 'info', f'{prefix}enabled: the controller is enabled',
-                             True)
+                             True, previous)
         return LinkEvent(state, 'warning', f'{prefix}disabled: 0 V, the controller is disabled',
-                         False)
+                         False, previous)
 
     def check(self, now_s: float, nt_connected: bool) -> LinkEvent | None:
         """The connection is down, or no reading for reading_timeout_s of awake time: lost."""
@@ -101,10 +104,10 @@ class RobotLink:
             return None
         if nt_connected and self.silent_s <= self.reading_timeout_s:
             return None
-        self.state = LinkState.LOST
+        previous, self.state = self.state, LinkState.LOST
         why = (f'no readings for {self.silent_s:.2f} s (NT still connected)' if nt_connected
                else 'NT disconnected')
         return LinkEvent(LinkState.LOST, 'error',
                          f'lost the robot: {why}: no commands until it is back (it holds where '
                          'its last profile ends); the controller stops as its joint states do',
-                         None)
+                         None, previous, self.silent_s, nt_connected)

@@ -98,7 +98,7 @@ class ClaimLink:
             self.disabled_to_yield = core.state != ArmState.DISABLED and \
                 core.enable(now_s, False)[0] and core.state == ArmState.DISABLED
             node.last_command = node.commander.last_profile = None
-            core.events.say(now_s, Kind.YIELDED, 'error', (
+            core.say(now_s, Kind.YIELDED, 'error', (
                 f'another controller ({owner.token}) has had the arm since '
                 f'{owner.since_s:.3f}, before this one ({mine.token if mine else "not ready"}): '
                 'this one sends nothing and answers that it does not command, until it goes'),
@@ -108,6 +108,6 @@ class ClaimLink:
         if self.disabled_to_yield and core.state == ArmState.DISABLED:
             what = core.enable(now_s, True)[1]
         self.disabled_to_yield = False
-        core.events.say(now_s, Kind.TAKEN_OVER, 'warning', 'the controller that had the arm '
-                        f'is gone (no claim heard for {CLAIM_STALE_S:g} s): {what}',
-                        'voltage_command')
+        core.say(now_s, Kind.TAKEN_OVER, 'warning', 'the controller that had the arm '
+                 f'is gone (no claim heard for {CLAIM_STALE_S:g} s): {what}',
+                 'voltage_command')

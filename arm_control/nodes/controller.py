@@ -25,43 +25,40 @@ import sys
 import threading
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import PointStamped, TwistStamped
 from nav_msgs.msg import Path
 import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import uninstall_signal_handlers
 from rclpy.time import Time
 from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64MultiArray, String
-from std_srvs.srv import SetBool, Trigger
 
 from arm_control import realtime
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
-from arm_control.control.health import diagnostics, health, loop_values, trust_values
 from arm_control.control.input_gate import InputGate
 from arm_control.control.latency import CommandDelay
 from arm_control.control.live_settings import changed_names, controller_settings, TUNABLE
 from arm_control.control.robot_command import Commander
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
-from arm_control.control.trust import GraphCounts, TrustWatch
+from arm_control.control.trust import TrustWatch
 from arm_control.nodes import messages
 from arm_control.nodes.claim_link import ClaimLink
+from arm_control.nodes.command_inputs import CommandInputs
 from arm_control.nodes.common import (COMMANDS, declare_parameters, Drained, guarded,
-                                      interrupt, LATCHED, log_at, loop_statistics, output,
-                                      PLANNER_AVAILABLE, run, STATE_STREAM, status, take_all)
+                                      interrupt, LATCHED, log_at, output, run, STATE_STREAM,
+                                      take_all)
 from arm_control.nodes.control_loop import ControlLoop
+from arm_control.nodes.controller_watch import ControllerWatch
 from arm_control.nodes.plan_link import PlanLink
 from arm_control.nodes.trajectory_server import TrajectoryServer
 from arm_control.parameters import ParameterError
 
 PLANNER_POLL_S = 0.05             # how often to look whether the planner is there ...
 PLANNER_SETTLED_POLL_S = 0.5      # ... once it is, with nothing asked of it and no goal
-GRAPH_WATCH_S = 0.5               # how often to count who else publishes its topics
 # The executor's thread (messages, services) at SCHED_FIFO this low when the loop is at real
 # time: above every normal process, below the loop. At normal priority a busy machine can
 # preempt it while it holds Python's lock, and the loop would then wait for the lock.
@@ -71,12 +68,8 @@ SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V comman
 # not after it (the stamp on this host's clock); else at its arrival.
 STAMP_TRUSTED_S = 0.05
 READINGS_KEPT = 4                 # joint_states kept for the next tick, the latest last
-# Goals, presets, driver commands kept until taken: answered or counted (``InputGate``).
-GOALS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 EVENTS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 MAX_ANGLE_RAD = 4.0 * math.pi     # no sensor of this arm reads beyond two turns
-LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
-          'error': DiagnosticStatus.ERROR}
 
 
 class ControllerNode(Node):
@@ -95,9 +88,8 @@ class ControllerNode(Node):
         self.claims = ClaimLink(self)                       # who keeps the arm
         # The latest reading for the loop, and the encoders and bus: (value, received at).
         self.readings, self.encoders, self.bus = [], None, None
-        self.bad_inputs = self.bad_inputs_said = 0
+        self.bad_inputs = 0
         self.last_state = self.last_queue_version = None
-        self.loop_periods_s, self.loop_compute_s, self.last_tick_s = [], [], None
         self.reading_ages_s = []            # arrival minus stamp of each joint_states
         self.command_delay = CommandDelay(self.config.period_s)
         self.commander = Commander(self.config)     # what to send, for the robot's instants
@@ -110,30 +102,18 @@ class ControllerNode(Node):
         self.state_pub = output(self, String, 'arm_state', LATCHED)
         self.queue_pub = output(self, Path, '~/goal_queue', LATCHED)
         self.events_pub = output(self, String, '~/events', EVENTS)
-        self.diagnostics_pub = output(self, DiagnosticArray, '/diagnostics', 10)
-        for topic, kind, handler, qos in (
-                ('joint_states', JointState, self.on_joint_states, STATE_STREAM),
-                ('goal_point', PointStamped, self.on_goal_point, GOALS),
-                ('goal_preset', String, self.on_goal_preset, GOALS),
-                ('driver_velocity', TwistStamped, self.on_driver, GOALS)):
-            self.create_subscription(kind, topic, handler, qos)
+        self.create_subscription(JointState, 'joint_states', self.on_joint_states, STATE_STREAM)
         # Taken as each joint_states arrives (a robot sends them first): ``Drained``.
         self.beside = [(self.create_subscription(kind, topic, handler, STATE_STREAM,
                                                  callback_group=Drained()), handler)
                        for topic, kind, handler in (
                            ('motor_encoders', JointState, self.on_encoders),
                            ('battery_state', BatteryState, self.on_battery))]
-        for name, call in (('~/estop', self.core.estop), ('~/reset', self.core.reset),
-                           ('~/cancel', self.core.cancel)):
-            self.create_service(Trigger, name, lambda request, response, call=call:
-                                self.on_service(response, call))
-        self.create_service(SetBool, '~/enable', lambda request, response: self.on_service(
-            response, self.core.enable, bool(request.data)))
+        self.inputs = CommandInputs(self)   # goals, presets, driver commands, services
         self.outputs = self.create_guard_condition(self.publish_outputs)
         self.planner_ready = None
         self.planner_timer = self.create_timer(PLANNER_POLL_S, self.watch_planner)
-        self.create_timer(1.0, self.publish_diagnostics)
-        self.create_timer(GRAPH_WATCH_S, self.watch_graph)
+        self.watch = ControllerWatch(self)      # /diagnostics, who else is on the graph
         priority = self.config.realtime_priority
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
                                 self.get_logger().warning, self.has_reading, self.plans.busy,
@@ -231,47 +211,6 @@ class ControllerNode(Node):
         # BatteryState's current is negative while discharging; NaN when not reported.
         self.bus = ((float(msg.voltage), -float(msg.current)), self.now_s())
 
-    @guarded
-    def on_goal_point(self, msg: PointStamped) -> None:
-        if not self.refused('goal_point', msg.header.frame_id, 'frame_id', 'goal'):
-            p = msg.point
-            self.command(self.core.submit_goal, p.x, p.y, p.z, msg.header.frame_id)
-
-    @guarded
-    def on_goal_preset(self, msg: String) -> None:
-        if not self.refused('goal_preset', msg.data, 'preset name', 'preset'):
-            self.command(self.core.submit_preset, msg.data.strip())
-
-    @guarded
-    def on_driver(self, msg: TwistStamped) -> None:
-        if not self.refused('driver_velocity', msg.header.frame_id, 'frame_id',
-                            'driver command'):
-            linear = msg.twist.linear
-            self.command(self.core.driver_command, linear.x, linear.y, msg.header.frame_id)
-
-    def refused(self, topic: str, text: str, what: str, whose: str) -> bool:
-        """An input beyond its topic's rate is dropped and counted (``InputGate``); text too
-        long to be a name is refused before anything formats it."""
-        if not self.gate.admit(topic, time.monotonic()):
-            return True
-        if self.claims.yielding:
-            self.command(self.core.goals.reject, f'{whose} rejected: another controller '
-                         'has the arm (this one yielded)', 'yielded')
-            return True
-        problem = messages.name_problem(text, what)
-        if problem:
-            self.command(self.core.goals.reject, f'{whose} rejected: {problem}', 'oversized')
-        return problem is not None
-
-    @guarded
-    def on_service(self, response, call, *args):
-        if self.claims.yielding:
-            response.success, response.message = False, 'another controller has the arm: ' \
-                'this one yielded and commands nothing'
-            return response
-        response.success, response.message = self.command(call, *args)
-        return response
-
     def on_parameters(self, params):
         """A run-time change: checked whole as at start (``controller_settings``), taken
         from the next period, or refused with the reason (the old values kept)."""
@@ -288,8 +227,8 @@ class ControllerNode(Node):
         self.plans.retune(settings.arm, settings.config)
         with self.lock:
             self.core.retune(settings.arm, settings.config, settings)
-            self.core.events.say(self.core_now_s(), Kind.PARAMETERS, 'info',
-                                 f'changed at run time: {", ".join(changed) or "nothing"}')
+            self.core.say(self.core_now_s(), Kind.PARAMETERS, 'info',
+                          f'changed at run time: {", ".join(changed) or "nothing"}')
         self.settings, self.arm, self.config = settings, settings.arm, settings.config
         self.outputs.trigger()
         return None
@@ -319,17 +258,6 @@ class ControllerNode(Node):
         if self.planner_timer.timer_period_ns != period_ns:
             self.planner_timer.timer_period_ns = period_ns
 
-    @guarded
-    def watch_graph(self) -> None:
-        """Who else publishes what it reads or writes, or takes its name (``TrustWatch``)."""
-        me = (self.get_name(), self.get_namespace())
-        counts = GraphCounts(*(self.count_publishers(topic) if topic else 0 for topic in (
-            'joint_states', '/clock' if self.loop.simulated() else '', 'voltage_command')),
-            self.get_node_names_and_namespaces().count(me))
-        with self.lock:
-            self.trust.graph(self.core_now_s(), counts)
-        self.outputs.trigger()
-
     def warn_bad(self, message: str) -> None:
         self.bad_inputs += 1
         self.get_logger().warning(message, throttle_duration_sec=1.0)
@@ -349,17 +277,19 @@ class ControllerNode(Node):
             if yields != self.claims.yielding:
                 self.claims.change(self, acts_s, yields)
             try:
-                voltage = self.core.step(acts_s, *(readings[-1] if readings else (None, None)),
-                                         earlier=readings[:-1])
+                step = self.core.step(acts_s, *(readings[-1] if readings else (None, None)),
+                                      earlier=readings[:-1])
             except Exception as error:              # a bug must stop the arm, not the node
                 self.core.estop(acts_s, f'internal error in the control step: {error!r}',
                                 cut_power=True)
-                voltage = np.zeros(2)
+                step = None
+            voltage = np.zeros(2) if step is None else step.volts
             self.trust.step(acts_s, self.loop.guard.take())
-            estimate, setpoint = self.core.estimate, self.core.setpoint
-            said = (self.core.events.waiting or self.core.goals.plans.waiting
-                    or self.core.state != self.last_state
-                    or self.core.goals.queue.version != self.last_queue_version)
+            last = self.core.last_step              # this period's, or before an error
+            estimate = self.core.estimate
+            setpoint = last.setpoint if last else (np.zeros(2), np.zeros(2), np.zeros(2))
+            said = self.core.news_waiting or step is None or (
+                step.state, step.queue_version) != (self.last_state, self.last_queue_version)
             commanding = estimate is not None and not yields \
                 and not self.claims.listening()     # nothing before a reading or a claim
             if commanding:
@@ -372,10 +302,7 @@ class ControllerNode(Node):
             self.estimate_pub.publish(messages.joint_state(stamp, estimate[:2], estimate[2:]))
         if said:                                    # the executor publishes what changed
             self.outputs.trigger()
-        if self.last_tick_s is not None:
-            self.loop_periods_s.append(now - self.last_tick_s)
-        self.last_tick_s = now
-        self.loop_compute_s.append(time.perf_counter() - began)
+        self.watch.ticked(now, time.perf_counter() - began)
 
     def on_timed_plan(self, timed) -> None:
         """From the worker's result thread: the plan to the core, from when the next command
@@ -389,10 +316,9 @@ class ControllerNode(Node):
     def publish_outputs(self) -> None:
         """In the executor: events, state and queue as they changed; plan requests out."""
         with self.lock:
-            events = self.core.events.take()
-            state, pending = self.core.state, self.core.pending_goals()
-            version = self.core.goals.queue.version
-            requests = self.core.take_plan_requests()
+            news = self.core.take_news()
+        events, state, pending = news.events, news.state, news.goals
+        version, requests = news.queue_version, news.plan_requests
         for event in events:
             self.events_pub.publish(String(data=str(event)))
             log_at(self.get_logger(), event.level, str(event))
@@ -409,32 +335,6 @@ class ControllerNode(Node):
             self.plans.let_keeper_work(False)      # a goal to plan: not while it moves
             self.plans.send(requests)
             self.poll_planner(False)
-
-    @guarded
-    def publish_diagnostics(self) -> None:
-        periods, self.loop_periods_s = self.loop_periods_s, []
-        compute, self.loop_compute_s = self.loop_compute_s, []
-        ages, self.reading_ages_s = self.reading_ages_s, []
-        stats = loop_statistics(periods, compute)
-        malformed, self.bad_inputs_said = self.bad_inputs - self.bad_inputs_said, self.bad_inputs
-        problems = [text for bad, text in (
-            (not self.plans.worker.alive, 'the plan worker process is gone: goals will fail'),
-            (malformed, f'{malformed} malformed messages ignored (the log says which)')) if bad]
-        with self.lock:
-            self.gate.flush(self.core, self.core_now_s(), time.monotonic())
-            values, planner = diagnostics(self.core, self.now_s()), self.core.planner_available
-            level, message = health(self.core, stats['worst'], problems,
-                                    self.trust.problems.values())
-            values.update(trust_values(self.trust))
-        values.update(loop_values(stats, ages, self.loop))
-        values.update({'bad inputs ignored': self.bad_inputs, PLANNER_AVAILABLE: bool(planner),
-                       'trajectories kept': self.plans.worker.kept,
-                       **{f'{kind} dropped': n for kind, n in self.gate.dropped.items()},
-                       'inputs dropped beyond the work share': self.gate.busy})
-        diagnostic = DiagnosticArray()
-        diagnostic.header.stamp = self.get_clock().now().to_msg()
-        diagnostic.status = [status(self, LEVELS[level], message, values)]
-        self.diagnostics_pub.publish(diagnostic)
 
     def on_shutdown(self) -> None:
         """The last word: sending profiles and powered, the last profile again (it ends at

@@ -49,7 +49,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMessage
-from sensor_msgs.msg import BatteryState, JointState
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
@@ -59,8 +59,8 @@ from arm_control.model.plant import ArmPlant
 from arm_control.model.profile import ProfileError
 from arm_control.model.robot_commands import RobotCommands
 from arm_control.nodes import messages
-from arm_control.nodes.common import (COMMANDS, declare_parameters, loop_statistics, run,
-                                      STATE_STREAM, status)
+from arm_control.nodes.common import COMMANDS, declare_parameters, loop_statistics, run, status
+from arm_control.nodes.sim_sensors import SensorTopics
 
 # The physics catches up at most this much at once; the rest of a stall is a pause.
 MAX_CATCH_UP_S = 0.03
@@ -108,12 +108,7 @@ class SimNode(Node):
         self.period_began_wall_s = self.wall_clock.now().nanoseconds * 1e-9
         self.period_due_wall_s = self.period_began_wall_s   # when the next period may begin
 
-        self.joint_states_pub = self.create_publisher(JointState, 'joint_states', STATE_STREAM)
-        self.encoders_pub = self.create_publisher(JointState, 'motor_encoders', STATE_STREAM)
-        self.truth_pub = self.create_publisher(JointState, '~/ground_truth', STATE_STREAM)
-        self.battery_pub = self.create_publisher(BatteryState, 'battery_state', STATE_STREAM)
-        self.currents_pub = self.create_publisher(Float64MultiArray, 'motor_currents',
-                                                  STATE_STREAM)
+        self.sensors = SensorTopics(self)
         self.events_pub = self.create_publisher(String, '~/events', 100)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(Float64MultiArray, 'voltage_command', self.on_voltage, COMMANDS)
@@ -304,7 +299,8 @@ class SimNode(Node):
         self.apply(instant, reading.potentiometer_rad, reading.velocity_rad_s)
         self.say_brownouts()
         self.reading_sent_ns = time.time_ns()
-        self.publish(reading)
+        self.sensors.publish(reading, self.origin_s, self.truths)
+        self.truths = []
         if self.simulated_time:     # after the reading: the controller's tick then finds it
             self.clock_pub.publish(ClockMessage(clock=self.stamp()))
 
@@ -317,34 +313,6 @@ class SimNode(Node):
             self.get_logger().error(text)
             self.brownouts_last_second.append(brownout)
         self.brownouts_said = len(self.plant.brownouts)
-
-    def publish(self, reading) -> None:
-        """One instant's reading; ``joint_states`` last, so that a controller reading it finds
-        the encoders and the bus of the same instant already there."""
-        stamp = Time(nanoseconds=round((self.origin_s + reading.time_s) * 1e9)).to_msg()
-        self.encoders_pub.publish(messages.joint_state(stamp, reading.encoder_rad,
-                                                       reading.encoder_velocity_rad_s))
-        # The true states since the last reading, then the reading's, each at its instant.
-        truths = [kept for kept in self.truths if kept[0] < reading.time_s - 1e-9]
-        truths.append((reading.time_s, self.origin_s + reading.time_s, reading.true_state,
-                       reading.effort_nm))
-        self.truths = []
-        for _, stamp_s, state, effort in truths:
-            self.truth_pub.publish(messages.joint_state(
-                Time(nanoseconds=round(stamp_s * 1e9)).to_msg(), state[:2], state[2:], effort))
-        battery = BatteryState(header=messages.header(stamp, ''), present=True,
-                               voltage=float(reading.bus_voltage),
-                               current=-float(reading.supply_current_a))
-        battery.power_supply_status = (BatteryState.POWER_SUPPLY_STATUS_CHARGING
-                                       if reading.supply_current_a < 0.0 else
-                                       BatteryState.POWER_SUPPLY_STATUS_DISCHARGING)
-        for name in ('temperature', 'charge', 'capacity', 'design_capacity', 'percentage'):
-            setattr(battery, name, math.nan)
-        self.battery_pub.publish(battery)
-        self.currents_pub.publish(Float64MultiArray(
-            data=[float(i) for i in reading.motor_current_a]))
-        self.joint_states_pub.publish(messages.joint_state(
-            stamp, reading.potentiometer_rad, reading.velocity_rad_s, reading.effort_nm))
 
     def publish_diagnostics(self) -> None:
         periods, self.periods_s = self.periods_s, []

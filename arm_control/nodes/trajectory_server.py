@@ -203,7 +203,7 @@ class TrajectoryServer:
         """Said as a rejected goal is (``~/events``, the error state when idle)."""
         if getattr(error, 'said', False):
             return
-        self.command(self.node.core.goals.reject,
+        self.command(self.node.core.reject,
                      f'{source} refused ({error.code.name}): {error.reason}',
                      error.code.name.lower())
 

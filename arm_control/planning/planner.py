@@ -10,7 +10,6 @@ arm was pushed there) first takes the shortest way out, to the nearest free cell
 the goal can be reached; only that first segment is not free.
 """
 
-from dataclasses import dataclass
 import math
 
 import numpy as np
@@ -18,21 +17,13 @@ import numpy as np
 from arm_control.config import ArmConfig, PlannerConfig
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
-from arm_control.planning.graph import ConfigurationGrid, segments_free
+from arm_control.planning.graph import ConfigurationGrid
+from arm_control.planning.plan import NoPlan, Plan
+from arm_control.planning.shortcut import COARSE_FACTOR, segment_is_free, shortcut
 from arm_control.planning.trees import GoalTrees
 
 # Lazily found blocked edges are cut and the search re-run at most this often per query.
 MAX_SEARCHES = 50
-# A segment is first sampled this many times more coarsely: most blocked ones fail there.
-COARSE_FACTOR = 10
-# ... and a shortcut candidate before that, this many times.
-SIGHT_FACTOR = 30
-# Shortcut candidates that pass the coarse check are checked finely, farthest first, this
-# many, each first at a step this many times coarser (a grazing segment fails there).
-MAX_FINE_CHECKS = 6
-MIDDLE_FACTOR = 3
-# At most this many corners ahead are tried from each kept waypoint.
-MAX_CANDIDATES = 24
 # The search first looks only this far (factor × the straight move's travel + margin), which
 # is exact when it finds the goal there, and everywhere otherwise.
 SEARCH_GUESS_FACTOR = 1.5
@@ -41,44 +32,6 @@ BRANCH_NAMES = ('elbow-positive', 'elbow-negative')
 # A start within this of a tree's goal on both joints (a robot resting on a preset, its pose
 # sent as a tool pose and back) plans from that tree.
 TREE_START_RAD = 1e-6
-
-
-@dataclass(frozen=True, eq=False)
-class Plan:
-    """A path in joint space, or the reason there is none.
-
-    Waypoints are continuous angles inside the joint travel, joined by straight segments
-    that never enter forbidden space -- except a start pushed into it (even past a hard
-    stop), whose first segment is the shortest way out.
-    """
-
-    waypoints_rad: np.ndarray   # (N, 2) start -> goal, continuous angles; (0, 2) when no plan
-    reason: str                 # '' on success, else a sentence a user understands
-    cost_rad: float             # Σ(|Δθa| + |Δθb|) along the waypoints (inf when no plan)
-
-    @property
-    def ok(self) -> bool:
-        return not self.reason
-
-    @classmethod
-    def failure(cls, reason: str) -> 'Plan':
-        return cls(np.zeros((0, 2)), reason, math.inf)
-
-    @classmethod
-    def through(cls, waypoints) -> 'Plan':
-        """A plan along ``waypoints``, repeated points dropped (no zero-length segments,
-        but always a start and a goal, equal when the arm is already there)."""
-        waypoints = np.array(waypoints, dtype=float).reshape(-1, 2)
-        moved = np.concatenate([[True], np.any(np.diff(waypoints, axis=0) != 0.0, axis=1)])
-        waypoints = waypoints[moved] if np.count_nonzero(moved) >= 2 else waypoints[[0, -1]]
-        waypoints.setflags(write=False)
-        return cls(waypoints, '', travel_rad(waypoints))
-
-
-def travel_rad(waypoints) -> float:
-    """Σ(|Δθa| + |Δθb|) along a polyline in joint space."""
-    waypoints = np.asarray(waypoints, dtype=float).reshape(-1, 2)
-    return float(np.abs(np.diff(waypoints, axis=0)).sum())
 
 
 def _degrees(q) -> str:
@@ -125,11 +78,11 @@ class Planner:
         goal_xy = np.asarray(goal_xy, dtype=float).ravel()
         if goal_xy.shape != (2,) or not np.all(np.isfinite(goal_xy)):
             return Plan.failure(f'the goal point must be two finite numbers (x, y), '
-                                f'got {goal_xy.tolist()}')
+                                f'got {goal_xy.tolist()}', NoPlan.BAD_INPUT)
         try:
             branches = self.kinematics.inverse(*goal_xy)
         except UnreachableError as error:
-            return Plan.failure(f'the goal is out of reach: {error}')
+            return Plan.failure(f'the goal is out of reach: {error}', NoPlan.OUT_OF_REACH)
         candidates = [self._in_travel(q) for q in branches]
         free = self.forbidden.is_free(np.array(candidates))
         goals = [goal for goal, ok in zip(candidates, free) if ok]
@@ -139,7 +92,7 @@ class Planner:
         if not goals:
             return Plan.failure(
                 f'the goal ({goal_xy[0]:.3f}, {goal_xy[1]:.3f}) m is forbidden on both elbow '
-                f'branches: {"; ".join(refusals)}')
+                f'branches: {"; ".join(refusals)}', NoPlan.FORBIDDEN_GOAL)
         return self._search(start, goals)[0]
 
     def plan_to_configuration(self, start_q, goal_q) -> Plan:
@@ -178,12 +131,12 @@ class Planner:
             goal_q = np.asarray(goal_q, dtype=float).ravel()
             if goal_q.shape != (2,) or not np.all(np.isfinite(goal_q)):
                 plans.append(Plan.failure(f'the goal configuration must be two finite angles, '
-                                          f'got {goal_q.tolist()}'))
+                                          f'got {goal_q.tolist()}', NoPlan.BAD_INPUT))
                 continue
             goal, why = self._goal(goal_q)
             if why is not None:
                 plans.append(Plan.failure(f'the goal configuration {_degrees(goal_q)} is '
-                                          f'forbidden: {why}'))
+                                          f'forbidden: {why}', NoPlan.FORBIDDEN_GOAL))
                 continue
             plans.append(None)
             goals.append(goal)
@@ -225,7 +178,7 @@ class Planner:
         start = np.asarray(start_q, dtype=float).ravel()
         if start.shape != (2,) or not np.all(np.isfinite(start)):
             return Plan.failure(f'the start configuration must be two finite angles, '
-                                f'got {start.tolist()}')
+                                f'got {start.tolist()}', NoPlan.BAD_INPUT)
         return self._in_travel(start)
 
     def _goal(self, q) -> tuple[np.ndarray, str | None]:
@@ -235,12 +188,8 @@ class Planner:
     # Search
 
     def segment_is_free(self, q_from, q_to, coarse_factor: float = COARSE_FACTOR) -> bool:
-        """``ForbiddenSpace.segment_is_free`` at ``check_step_rad``, after a pass at a
-        ``coarse_factor`` times coarser step that rejects most blocked segments for a
-        fraction of the cost (a forbidden sample is forbidden at any step)."""
-        step = self.forbidden.check_step_rad
-        coarse = self.forbidden.segment_is_free(q_from, q_to, coarse_factor * step)
-        return coarse and self.forbidden.segment_is_free(q_from, q_to, step)
+        """``shortcut.segment_is_free`` in free space."""
+        return segment_is_free(self.forbidden, q_from, q_to, coarse_factor)
 
     def _search(self, start: np.ndarray, goals: list[np.ndarray], each: bool = False):
         """[the plan to the cheapest of ``goals``], or with ``each`` a plan to each of them,
@@ -266,7 +215,8 @@ class Planner:
                   for members in groups]
         narrow = Plan.failure(
             'no connection: the free space around the goal is narrower than the planner grid '
-            f'({math.degrees(grid.resolution_rad):.2f} deg); try a finer grid_resolution_rad')
+            f'({math.degrees(grid.resolution_rad):.2f} deg); try a finer grid_resolution_rad',
+            NoPlan.NO_CONNECTION)
         plans = [plan or (None if labels[g] else narrow) for g, plan in enumerate(plans)]
         open_groups = [g for g, plan in enumerate(plans) if plan is None]
         if not open_groups:
@@ -277,7 +227,7 @@ class Planner:
             if len(source_nodes) == 0:
                 boxed = Plan.failure(
                     f'no connection: the start {_degrees(start)} is boxed in by forbidden '
-                    'space closer than the planner grid reaches')
+                    'space closer than the planner grid reaches', NoPlan.NO_CONNECTION)
                 return [plan or boxed for plan in plans]
         else:
             escape = self._way_out(start, set().union(*(labels[g] for g in open_groups)))
@@ -285,14 +235,14 @@ class Planner:
                 trapped = Plan.failure(
                     f'no connection: the start {_degrees(start)} is in forbidden space '
                     f'({self.forbidden.why_forbidden(start)}) and no free configuration '
-                    'connected to the goal exists')
+                    'connected to the goal exists', NoPlan.NO_CONNECTION)
                 return [plan or trapped for plan in plans]
             source_nodes = np.array([escape])
             source_costs = np.abs(grid.configurations[escape] - start).sum(keepdims=True)
         source_labels = {int(label) for label in grid.components[source_nodes]}
         separated = Plan.failure(
             f'no connection: forbidden space separates the start {_degrees(start)} from the '
-            'goal; no collision-free path joins them')
+            'goal; no collision-free path joins them', NoPlan.SEPARATED)
         for g in open_groups:
             if not labels[g] & source_labels:
                 plans[g] = separated
@@ -336,7 +286,7 @@ class Planner:
         except RuntimeError:
             blocked = Plan.failure('no connection found: too many grid edges turned out '
                                    'blocked by thin forbidden regions; try a finer '
-                                   'grid_resolution_rad')
+                                   'grid_resolution_rad', NoPlan.NO_CONNECTION)
             return [plan or blocked for plan in plans]
         for g, result in zip(open_groups, found):
             if result is None:
@@ -359,11 +309,11 @@ class Planner:
         """The plan along the grid path ``nodes``: from the start (or its way out) to the
         goal, shortcut."""
         middle = self.grid.configurations[nodes]
-        path = self._shortcut(np.vstack([middle, goal] if escape is not None
-                                        else [start, middle, goal]))
+        path = shortcut(self.forbidden, np.vstack([middle, goal] if escape is not None
+                                                  else [start, middle, goal]))
         if path is None:
             return Plan.failure('no connection: the grid path failed its final collision '
-                                'check; try a finer grid_resolution_rad')
+                                'check; try a finer grid_resolution_rad', NoPlan.NO_CONNECTION)
         return Plan.through(path if escape is None else np.vstack([start, path]))
 
     def _way_out(self, start: np.ndarray, labels: set[int]) -> int | None:
@@ -375,42 +325,3 @@ class Planner:
             return None
         travel = np.abs(grid.configurations[candidates] - start).sum(axis=1)
         return int(candidates[np.argmin(travel)])
-
-    def _shortcut(self, path: np.ndarray) -> np.ndarray | None:
-        """Drop the waypoints a checked straight segment can skip.
-
-        From each kept waypoint, jump to the farthest corner of the grid path in sight: the
-        corners ahead (up to ``MAX_CANDIDATES``, evenly spread) are tried at once at a coarse
-        step (a forbidden sample is forbidden at any step), then the farthest that passed is
-        checked with ``ForbiddenSpace.segment_is_free`` at ``check_step_rad``, after a pass
-        at ``MIDDLE_FACTOR`` times that step. With none in sight, the next
-        grid step (checked when the grid path was found) is kept.
-        """
-        step = self.forbidden.check_step_rad
-        last = len(path) - 1
-        moves = np.diff(path, axis=0)
-        corners = np.flatnonzero(np.any(np.abs(np.diff(moves, axis=0)) > 1e-12, axis=1)) + 1
-        corners = np.append(corners, last)
-        kept, unchecked = [0], []
-        while kept[-1] < last:
-            anchor = kept[-1]
-            ahead = corners[corners > anchor + 1]
-            if len(ahead) > MAX_CANDIDATES:               # evenly spread, the last included
-                ahead = ahead[np.linspace(0, len(ahead) - 1, MAX_CANDIDATES).round().astype(int)]
-            for factor in (SIGHT_FACTOR, COARSE_FACTOR):     # coarsest first: cheap misses
-                ahead = ahead[segments_free(self.forbidden, np.broadcast_to(
-                    path[anchor], (len(ahead), 2)), path[ahead], factor * step)]
-            in_sight = ahead
-            chosen = anchor + 1
-            for corner in in_sight[::-1][:MAX_FINE_CHECKS]:
-                if self.segment_is_free(path[anchor], path[corner], MIDDLE_FACTOR):
-                    chosen = int(corner)
-                    break
-            if chosen == anchor + 1:
-                unchecked.append(anchor)
-            kept.append(chosen)
-        # The grid steps kept were checked with the same samples up to rounding; recheck them
-        # with the function a caller would use, and fall back to the whole grid path if not.
-        if all(self.forbidden.segment_is_free(path[a], path[a + 1], step) for a in unchecked):
-            return path[kept]
-        return path if self.forbidden.path_is_free(path, step) else None

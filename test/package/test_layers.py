@@ -88,3 +88,22 @@ def test_no_test_module_imports_another():
                                    & tests - {path.stem})
                  for path in sources}
     assert not {name: borrowed for name, borrowed in borrowing.items() if borrowed}
+
+
+MAX_MODULE_LINES, MAX_CLASS_LINES = 400, 300
+
+
+def test_no_module_or_class_is_too_long():
+    """No module over MAX_MODULE_LINES lines, no class over MAX_CLASS_LINES (its decorators
+    and docstring included): a newcomer reads each in one sitting."""
+    long = []
+    for module, path in SOURCES.items():
+        text = path.read_text()
+        if len(text.splitlines()) > MAX_MODULE_LINES:
+            long.append(f'{module}: {len(text.splitlines())} lines')
+        for node in ast.walk(ast.parse(text, str(path))):
+            if isinstance(node, ast.ClassDef):
+                first = min([node.lineno] + [d.lineno for d in node.decorator_list])
+                if node.end_lineno - first + 1 > MAX_CLASS_LINES:
+                    long.append(f'{module}.{node.name}: {node.end_lineno - first + 1} lines')
+    assert not long, long

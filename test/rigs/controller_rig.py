@@ -31,7 +31,7 @@ def reached(core):
 
 
 def goal_q_error(rig):
-    return np.abs(rig.true_q - rig.core.goals.goal_q)
+    return np.abs(rig.true_q - rig.core.last_step.goal_q)
 
 
 def reading_at(q, velocity=(0.0, 0.0)):
@@ -42,7 +42,7 @@ def drive(core, t, readings, period=0.02):
     """Step ``core`` with ``readings``; return the time after and the voltages."""
     voltages = []
     for reading in readings:
-        voltages.append(core.step(t, reading))
+        voltages.append(core.step(t, reading).volts)
         t += period
     return t, voltages
 
@@ -64,7 +64,7 @@ def run(core, plant, seconds, period_s, sensors=True, until=None):
     times = []
     for _ in range(round(seconds / period_s)):
         reading = plant.read() if sensors else None
-        voltage = core.step(plant.time_s, reading)
+        voltage = core.step(plant.time_s, reading).volts
         times.append((plant.time_s, np.array(voltage)))
         plant.set_voltage(voltage)
         plant.advance(period_s)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from arm_control.planning.planner import travel_rad
+from arm_control.planning.plan import travel_rad
 
 
 FRC_FILE = Path(__file__).resolve().parents[2] / 'config' / 'frc_robot.yaml'

@@ -9,7 +9,7 @@ filter is in the loop; nothing here reads the true state except the assertions.
 import dataclasses
 import math
 
-from controller_rig import DEG, goal_q_error, kinds, reached, Rig, START
+from controller_rig import DEG, goal_q_error, kinds, reached, reading_at, Rig, START
 import numpy as np
 import pytest
 
@@ -44,9 +44,8 @@ def test_reaches_every_preset_in_order_within_tolerance(arm, controller_config, 
         assert rig.kinematics.forward(rig.true_q) == pytest.approx((x, y), abs=0.02)
     assert rig.lowest_m == 0.0                          # no point of either link below y = 0
     assert np.max(np.abs(rig.voltages)) <= arm.battery.nominal_voltage
-    arrivals = [e.message for e in rig.core.events.history if e.kind == Kind.GOAL_REACHED]
-    assert len(arrivals) == len(names)
-    assert all(f"'{name}'" in said for name, said in zip(names, arrivals))   # in order
+    arrivals = [e.goal_xy_m for e in rig.core.events.history if e.kind == Kind.GOAL_REACHED]
+    assert arrivals == [(x, y) for _, x, y in arm.presets]                  # in order
 
 
 def test_holds_the_goal_after_arriving(arm, controller_config, planner):
@@ -116,7 +115,7 @@ def test_a_flood_of_goals_is_answered_and_counted_and_memory_stays_bounded(
     events = rig.core.events.take()
     queued = sum(e.kind == Kind.GOAL_QUEUED for e in events)
     said = sum(e.kind == Kind.GOAL_REJECTED for e in events)
-    counted = sum(int(e.message.split()[0]) for e in events if e.kind == Kind.GOALS_REJECTED)
+    counted = sum(e.count for e in events if e.kind == Kind.GOALS_REJECTED)
     assert queued == 1 + controller_config.goal_queue_size
     assert queued + said + counted == 5000
     assert said <= 25 and len(events) <= 200
@@ -206,6 +205,29 @@ def test_asynchronous_planning_round_trip(arm, controller_config, planner):
     rig.core.on_timed_plan(rig.now, timed)
     assert rig.core.state == ArmState.TRACKING
     assert rig.run(5.0, rig.in_state(ArmState.HOLDING))
+
+
+def test_a_step_is_one_value_with_its_events_and_the_plan_requests_waiting(
+        arm, controller_config):
+    """``step`` returns the volts with what they came from: the events said in that step
+    (no other), the plan requests waiting until ``take_news`` takes them, once."""
+    core = ArmController(arm, controller_config)
+    first = core.step(0.0, reading_at(START))
+    assert [e.kind for e in first.events] == [Kind.SENSORS_BACK] and not first.plan_requests
+    assert np.all(first.volts == core.voltage) and first.estimate is not None
+    core.submit_goal(0.01, 1.1, 0.9)
+    planning = core.step(0.02, reading_at(START))
+    assert planning.state == ArmState.PLANNING and planning.events == ()
+    (request,) = planning.plan_requests
+    assert planning.queue_version != first.queue_version
+    news = core.take_news()
+    assert news.plan_requests == (request,) and len(news.goals) == 1
+    assert [e.kind for e in news.events] == [Kind.SENSORS_BACK, Kind.GOAL_QUEUED]
+    assert core.step(0.04, reading_at(START)).plan_requests == ()
+    steps = [core.step(0.02 * k, None) for k in range(3, 40)]
+    lost = next(step for step in steps if step.events)
+    assert [e.kind for e in lost.events] == [Kind.SENSORS_LOST]
+    assert lost.unpowered and lost.state == ArmState.NO_SENSORS and not np.any(lost.volts)
 
 
 def test_a_goal_for_an_idle_arm_is_asked_for_at_once_and_the_next_waits_its_turn(
@@ -304,17 +326,17 @@ def test_a_preempting_goal_takes_over_the_moving_arm_smoothly(arm, controller_co
     rig.core.submit_preset(rig.now, 'back_score')
     rig.run(0.4)
     assert rig.core.state == ArmState.TRACKING
-    moving = np.abs(rig.core.setpoint[1])
+    moving = np.abs(rig.core.last_step.setpoint[1])
     assert np.max(moving) > 1.0                        # well under way
     rig.core.submit_preset(rig.now, 'floor_pickup')
-    previous = rig.core.setpoint
+    previous = rig.core.last_step.setpoint
     jumps, speed_jumps = [], []
     while rig.core.state != ArmState.HOLDING and rig.now < 10.0:
         rig.step()
-        q, qd, qdd = rig.core.setpoint
+        q, qd, qdd = rig.core.last_step.setpoint
         jumps.append(np.max(np.abs(q - previous[0] - previous[1] * rig.period_s)))
         speed_jumps.append(np.max(np.abs(qd - previous[1])))
-        previous = rig.core.setpoint
+        previous = rig.core.last_step.setpoint
     assert rig.core.state == ArmState.HOLDING
     assert rig.kinematics.forward(rig.true_q) == pytest.approx((1.2, 0.15), abs=0.03)
     # Position continues (within what one period of acceleration moves it) and so does
@@ -329,7 +351,7 @@ def test_cancel_brakes_along_the_path_and_holds(arm, controller_config, planner)
     rig.core.submit_preset(rig.now, 'back_score')
     rig.core.submit_preset(rig.now, 'stow', preempt=False)
     rig.run(0.4)
-    assert np.max(np.abs(rig.core.setpoint[1])) > 1.0
+    assert np.max(np.abs(rig.core.last_step.setpoint[1])) > 1.0
     ok, _ = rig.core.cancel(rig.now)
     assert ok and kinds(rig.core)[-1] == Kind.CANCELLED
     assert rig.core.state == ArmState.WAITING and rig.core.pending_goals() == []

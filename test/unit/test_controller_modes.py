@@ -20,7 +20,7 @@ def test_driver_mode_moves_the_tool_at_the_commanded_velocity(arm, controller_co
     for _ in range(50):                                 # 1 s at 0.3 m/s forward
         rig.core.driver_command(rig.now, 0.3, 0.0)
         rig.step()
-    q, qd, _ = rig.core.setpoint
+    q, qd, _ = rig.core.last_step.setpoint
     tool_velocity = rig.kinematics.jacobian(q) @ qd
     assert tool_velocity == pytest.approx((0.3, 0.0), abs=0.01)
     assert rig.core.state == ArmState.DRIVER
@@ -152,7 +152,7 @@ def test_new_gains_act_from_the_next_period(arm, controller_config):
     cores[1].retune(arm, dataclasses.replace(controller_config, shoulder_pid=(2 * kp, ki, kd)))
     for core in cores:
         core.step(0.04, readings[2])
-    error = cores[0].tracking_error_rad[0]
+    error = cores[0].last_step.tracking_error_rad[0]
     assert abs(error) > 0.003
-    difference = cores[1].feedback_v[0] - cores[0].feedback_v[0]
+    difference = cores[1].last_step.feedback_v[0] - cores[0].last_step.feedback_v[0]
     assert difference == pytest.approx(kp * error, rel=1e-6)

@@ -23,8 +23,8 @@ def test_estop_when_the_tracking_error_stays_too_large(arm, controller_config):
     limit = controller_config.tracking_error_limit_rad
     over_since, t_estop = None, None
     for reading in drift(START, -25 * DEG, 50) + still((START[0] - 25 * DEG, START[1]), 50):
-        voltage = core.step(t, reading)
-        if over_since is None and np.max(np.abs(core.tracking_error_rad)) > limit:
+        voltage = core.step(t, reading).volts
+        if over_since is None and np.max(np.abs(core.last_step.tracking_error_rad)) > limit:
             over_since = t
         if core.state == ArmState.ESTOPPED:
             t_estop = t
@@ -40,7 +40,7 @@ def test_estop_when_the_tracking_error_stays_too_large(arm, controller_config):
     assert all(list(v) == [0.0, 0.0] for v in voltages)
     assert not core.submit_goal(t, 1.0, 1.0)[0]
     assert core.reset(t)[0] and core.state == ArmState.WAITING
-    assert np.any(core.step(t + 0.02, reading_at(START)) != 0.0)
+    assert np.any(core.step(t + 0.02, reading_at(START)).volts != 0.0)
 
 
 def test_a_short_tracking_error_excursion_does_not_estop(arm, controller_config):
@@ -51,7 +51,7 @@ def test_a_short_tracking_error_excursion_does_not_estop(arm, controller_config)
     worst = 0.0
     for reading in away + back + still(START, 30):             # above 20 deg for < 0.5 s
         core.step(t, reading)
-        worst = max(worst, np.max(np.abs(core.tracking_error_rad)))
+        worst = max(worst, np.max(np.abs(core.last_step.tracking_error_rad)))
         t += 0.02
     assert worst > controller_config.tracking_error_limit_rad
     assert core.state == ArmState.WAITING
@@ -76,7 +76,7 @@ def test_estop_when_a_joint_is_past_its_limit(arm, controller_config, joint, ang
     core.step(0.0, reading_at(START))
     q = list(START)
     q[joint] = angle
-    assert list(core.step(0.02, reading_at(q))) == [0.0, 0.0]
+    assert list(core.step(0.02, reading_at(q)).volts) == [0.0, 0.0]
     assert core.state == ArmState.ESTOPPED
     (failure,) = [e for e in core.events.history if e.kind == Kind.CONTROL_FAILED]
     assert (arm.shoulder, arm.elbow)[joint].name in failure.message     # the joint, named
@@ -99,7 +99,7 @@ def estopped_mid_move(arm, controller_config, planner, **changes):
 def test_an_estop_by_service_brakes_to_rest_and_holds_the_arm_there(arm, controller_config,
                                                                     planner):
     rig = estopped_mid_move(arm, controller_config, planner)
-    assert rig.core.estop_holding
+    assert not rig.core.unpowered                       # held, not at 0 V
     assert not rig.core.submit_preset(rig.now, 'stow')[0]
     rig.run(1.0)
     stopped = rig.true_q
@@ -136,7 +136,7 @@ def test_an_estop_cuts_the_power_when_asked_to_and_the_arm_falls(arm, controller
             rig.run(1.0, lambda: not np.any(rig.voltages[-1]))
             assert rig.now - lost_at <= controller_config.joint_state_timeout_s + \
                 2 * rig.period_s
-    assert not rig.core.estop_holding
+    assert rig.core.unpowered
     rig.step()
     cut = rig.true_q
     rig.run(1.0)
@@ -256,7 +256,7 @@ def test_a_sim_reset_mid_motion_holds_there_then_replans_the_goal(arm, controlle
     assert Kind.ARM_MOVED in kinds(rig.core)
     assert rig.run(6.0, lambda: reached(rig.core) == 1)
     assert rig.kinematics.forward(rig.true_q) == pytest.approx((-1.0, 1.0), abs=0.03)
-    assert rig.core.estops == 0
+    assert ArmState.ESTOPPED not in [to for _, _, to in rig.core.machine.history]
 
 
 def test_a_start_pushed_into_forbidden_space_gets_out_first(arm, controller_config, planner):

@@ -197,15 +197,15 @@ def test_the_link_goes_found_lost_back_with_one_event_each():
     link = rules.RobotLink(0.1)
     assert link.outgoing((3.0, 4.0)) == rules.ZERO_V              # nothing heard yet
     event = link.on_reading(1.0, robot_enabled=True)
-    assert event.state == rules.LinkState.ENABLED and 'robot found, enabled' in event.message
+    assert (event.previous, event.state) == (rules.LinkState.CONNECTING, rules.LinkState.ENABLED)
     assert event.controller_enabled is True
     assert link.may_command and link.outgoing((3.0, 4.0)) == (3.0, 4.0)
     assert link.check(1.0, nt_connected=True) is None
     for k in range(1, 5):
         assert link.check(1.0 + 0.02 * k, nt_connected=True) is None   # 0.08 s: not yet
     lost = link.check(1.12, nt_connected=True)
-    assert lost.level == 'error' and 'no readings for 0.12 s (NT still connected)' in \
-        lost.message
+    assert lost.level == 'error' and lost.state == rules.LinkState.LOST and lost.nt_connected
+    assert lost.silent_s == pytest.approx(0.12)
     # Lost is not disabled: the controller stops as its joint states stop, and carries on
     # with its goals when they return.
     assert lost.controller_enabled is None
@@ -214,7 +214,8 @@ def test_the_link_goes_found_lost_back_with_one_event_each():
     assert not link.may_command and link.outgoing((3.0, 4.0)) is None
     assert link.check(2.0, nt_connected=False) is None            # said once
     back = link.on_reading(2.5, robot_enabled=True)
-    assert back.level == 'info' and back.message.startswith('robot back, enabled')
+    assert back.level == 'info'
+    assert (back.previous, back.state) == (rules.LinkState.LOST, rules.LinkState.ENABLED)
     assert link.outgoing((3.0, 4.0)) == (3.0, 4.0)
 
 
@@ -222,7 +223,7 @@ def test_a_disabled_robot_gets_0v_and_a_disabled_controller():
     link = rules.RobotLink(0.1)
     link.on_reading(1.0, robot_enabled=True)
     event = link.on_reading(1.02, robot_enabled=False)
-    assert event.level == 'warning' and 'disabled: 0 V' in event.message
+    assert event.level == 'warning' and event.state == rules.LinkState.DISABLED
     assert event.controller_enabled is False
     assert not link.may_command and link.outgoing((5.0, 5.0)) == rules.ZERO_V
     enabled = link.on_reading(1.04, robot_enabled=True)

@@ -44,7 +44,7 @@ def worst_tracking_deg(arm, controller_config, planner, delay_s, told=True, seed
 
     def acting(voltage):                      # the plant is at the instant the command acts
         if loop.core.state == ArmState.TRACKING:
-            errors.append(np.abs(loop.true_q - loop.core.setpoint[0]))
+            errors.append(np.abs(loop.true_q - loop.core.last_step.setpoint[0]))
         apply(voltage)
     loop.plant.set_voltage = acting
     loop.core.submit_goal(loop.now, *STOW)

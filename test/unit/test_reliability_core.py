@@ -110,7 +110,7 @@ def test_bunched_readings_are_not_a_leap(arm, controller_config):
         elif index % 6 == 1:                    # the newest, received 2 ms after it
             reading, received = held[-1], now - period_s + 0.002
             held = []
-        voltage = core.step(now, reading, received)
+        voltage = core.step(now, reading, received).volts
         plant.set_voltage(voltage)
         plant.advance(period_s)
         if core.state == ArmState.ESTOPPED:
@@ -142,13 +142,13 @@ def test_a_stall_that_froze_the_arm_too_brakes_or_rejoins_then_reaches_the_goal(
     assert core.state == ArmState.NO_SENSORS
     lowest, offset = [], clock_s - plant.time_s
     for _ in range(round(3.0 / period_s)):
-        plant.set_voltage(core.step(plant.time_s + offset, plant.read()))
+        plant.set_voltage(core.step(plant.time_s + offset, plant.read()).volts)
         plant.advance(period_s)
         lowest.append(ForbiddenSpace(arm).lowest_point_m(np.array(plant.state[:2])[None])[0])
-    said = [str(e) for e in core.events.take()]
-    back = [e for e in said if e.startswith('sensors_back')]
+    said = core.events.take()
+    back = [e.message for e in said if e.kind == Kind.SENSORS_BACK]
     assert back and ('still on its plan' in back[-1] or 'planned again' in back[-1]), said
-    assert any(e.startswith('goal_reached') for e in said), said
+    assert Kind.GOAL_REACHED in [e.kind for e in said], said
     assert min(lowest) >= 0.0
 
 
@@ -169,14 +169,14 @@ def test_commands_lost_mid_move_then_the_arm_is_brought_back_not_dropped(arm, co
     run(core, plant, 0.1, period_s)
     lowest = []
     for step in range(round(4.0 / period_s)):
-        voltage = core.step(plant.time_s, plant.read())
+        voltage = core.step(plant.time_s, plant.read()).volts
         plant.set_voltage(np.zeros(2) if step < round(0.3 / period_s) else voltage)
         plant.advance(period_s)
         lowest.append(ForbiddenSpace(arm).lowest_point_m(np.array(plant.state[:2])[None])[0])
-    said = [str(e) for e in core.events.take()]
+    said = core.events.take()
     assert core.state != ArmState.ESTOPPED, said
-    assert any(e.startswith('off_plan') for e in said), said
-    assert any(e.startswith('goal_reached: reached (-0.600, 1.500)') for e in said), said
+    assert Kind.OFF_PLAN in [e.kind for e in said], said
+    assert (Kind.GOAL_REACHED, (-0.6, 1.5)) in [(e.kind, e.goal_xy_m) for e in said], said
     assert min(lowest) >= 0.0
 
 
@@ -193,12 +193,12 @@ def test_a_move_whose_first_commands_are_held_up_waits_for_the_arm_and_keeps_off
     core.submit_goal(plant.time_s, -1.7, 0.1)
     lowest = []
     for step in range(round(3.0 / period_s)):
-        voltage = core.step(plant.time_s, plant.read())
+        voltage = core.step(plant.time_s, plant.read()).volts
         if step >= round(0.04 / period_s):
             plant.set_voltage(voltage)
         plant.advance(period_s)
         lowest.append(ForbiddenSpace(arm).lowest_point_m(np.array(plant.state[:2])[None])[0])
-    said = [str(e) for e in core.events.take()]
-    reached = [e for e in said if e.startswith('goal_reached: reached (-1.700, 0.100)')]
-    assert reached and 'waiting for the arm' in reached[0], said
+    said = core.events.take()
+    assert (Kind.GOAL_REACHED, (-1.7, 0.1)) in [(e.kind, e.goal_xy_m) for e in said], said
+    assert core.goals.latency.waiting_for_the_arm_s > 0.0       # the last goal's, that one
     assert min(lowest) >= 0.0

@@ -134,8 +134,9 @@ def test_a_profile_from_a_hold_ends_at_rest_with_the_holding_volts(arm, controll
     core.step(start_s, loop.plant.read(), loop.now_s)
     profile = profile_ahead(core, start_s, PERIOD_S)
     last = profile.setpoints[-1]
-    holding = core.feedforward.dynamics.voltages(np.array(last.position_rad), np.zeros(2),
-                                                 np.zeros(2)) + np.array(core.pid.integral_v)
+    tracking = core.tracking
+    holding = tracking.feedforward.dynamics.voltages(
+        np.array(last.position_rad), np.zeros(2), np.zeros(2)) + np.array(tracking.pid.integral_v)
     assert len(profile.setpoints) >= AHEAD and last.velocity_rad_s == (0.0, 0.0)
     assert last.feedforward_v == pytest.approx(tuple(holding))
     share = controller_config.robot_feedback_share

@@ -44,7 +44,7 @@ def test_a_moveit_style_trajectory_is_tracked_closely_and_reached(arm, controlle
                                                                   goals):
     rig = Rig(arm, controller_config)
     settled(rig)
-    start = rig.core.setpoint[0].copy()
+    start = rig.core.last_step.setpoint[0].copy()
     rows = moveit_style(start, (1.0, -0.6), 2.5, count=25)
     motion = follow(rig, goals, rows)
     assert rig.core.state == ArmState.TRACKING
@@ -63,7 +63,7 @@ def test_an_estop_ends_the_trajectory_and_it_is_not_planned_again(arm, controlle
                                                                   goals):
     rig = Rig(arm, controller_config)
     settled(rig)
-    start = rig.core.setpoint[0].copy()
+    start = rig.core.last_step.setpoint[0].copy()
     motion = follow(rig, goals, moveit_style(start, (1.0, -0.6), 2.5))
     rig.run(0.5)
     rig.core.estop(rig.now)
@@ -78,7 +78,7 @@ def test_a_push_off_the_trajectory_leaves_it_without_planning_it_again(arm, cont
                                                                        goals):
     rig = Rig(arm, controller_config)
     settled(rig)
-    start = rig.core.setpoint[0].copy()
+    start = rig.core.last_step.setpoint[0].copy()
     motion = follow(rig, goals, moveit_style(start, (1.0, -0.6), 2.5))
     rig.run(0.3)
     rig.plant.state[0] += 0.3                        # pushed 17 deg
