@@ -30,6 +30,14 @@ def planner(arm):
     return Planner(arm, config.load('planner')[1])
 
 
+@pytest.fixture(scope='module')
+def frc():
+    """The competition robot's arm and a planner on it at the file's resolution (1°)."""
+    from planning_checks import FRC_FILE
+    arm, planner_config = config.load('planner', FRC_FILE)
+    return Planner(arm, planner_config)
+
+
 def with_joint(arm, joint_name, **changes):
     """A copy of ``arm`` with fields of one joint changed."""
     joint = dataclasses.replace(getattr(arm, joint_name), **changes)

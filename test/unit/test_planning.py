@@ -224,20 +224,20 @@ def test_a_start_inside_the_intake_takes_the_shortest_way_out_first(frc):
     assert way_out >= nearest - 2 * lattice_step
 
 
-def test_a_start_inside_the_clearance_steps_out_then_goes_straight_when_it_can(seed_planner):
+def test_a_start_inside_the_clearance_steps_out_then_goes_straight_when_it_can(planner):
     """The upper arm stretched back, within the clearance of the floor (3/4 of it): free,
     but within the clearance. The shortest path keeps the clearance once out of it: the
     nearest way out, then the straight segment to the goal, which costs the least there is."""
-    clearance = seed_planner.arm.world.clearance_rad
+    clearance = planner.arm.world.clearance_rad
     start = np.array([math.pi - 0.75 * clearance, math.radians(-74.04)])
     goal = np.radians([39.4, -64.1])
-    assert seed_planner.forbidden.is_free(start)
-    assert not seed_planner.forbidden.clear_by(start, clearance)
-    plan = seed_planner.plan_to_configuration(start, goal)
-    assert_free_path(seed_planner, plan, start, goal)
+    assert planner.forbidden.is_free(start)
+    assert not planner.forbidden.clear_by(start, clearance)
+    plan = planner.plan_to_configuration(start, goal)
+    assert_free_path(planner, plan, start, goal)
     out, rest = plan.waypoints_rad[1], plan.waypoints_rad[1:]
-    assert np.abs(out - start).sum() <= 2 * seed_planner.config.grid_resolution_rad
-    assert seed_planner.forbidden.clear_by(rest, clearance).all()
+    assert np.abs(out - start).sum() <= 2 * planner.config.grid_resolution_rad
+    assert planner.forbidden.clear_by(rest, clearance).all()
     assert plan.cost_rad == pytest.approx(np.abs(out - start).sum() + np.abs(goal - out).sum())
 
 
@@ -260,13 +260,13 @@ def test_plan_to_a_wrapped_goal_takes_it_into_the_joint_travel(frc):
 # Optimality against brute force on small grids
 
 
-def test_paths_keep_the_clearance_where_one_can(frc, seed_planner):
+def test_paths_keep_the_clearance_where_one_can(frc, planner):
     """Between presets (each held within the clearance), and from low near the floor to full
     extension low, the whole path keeps the clearance on both joints: an overshoot of up to
     the clearance then stays out of forbidden space."""
     for planner, moves in (
             (frc, [(a, b) for a in presets(frc).values() for b in presets(frc).values()]),
-            (seed_planner, [((0.6, 0.1), (1.75, 0.1)), ((-1.5, 0.15), (1.5, 0.15))])):
+            (planner, [((0.6, 0.1), (1.75, 0.1)), ((-1.5, 0.15), (1.5, 0.15))])):
         clear = planner.clear.forbidden
         for start_xy, goal_xy in moves:
             start = next(q for q in planner.kinematics.inverse(*start_xy)
@@ -276,9 +276,9 @@ def test_paths_keep_the_clearance_where_one_can(frc, seed_planner):
             assert clear.path_is_free(plan.waypoints_rad, CHECK_STEP_RAD), (start_xy, goal_xy)
 
 
-def test_a_goal_inside_the_clearance_is_still_planned_to_in_free_space(seed_planner):
+def test_a_goal_inside_the_clearance_is_still_planned_to_in_free_space(planner):
     """No path keeps the clearance to a goal within it: the free one is the answer."""
-    planner = seed_planner
+    planner = planner
     goal = np.array([planner.arm.world.clearance_rad / 2, math.radians(5.0)])   # near the floor
     assert planner.forbidden.is_free(goal) and not planner.clear.forbidden.is_free(goal)
     plan = planner.plan_to_configuration([math.radians(90), math.radians(-90)], goal)

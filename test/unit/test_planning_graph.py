@@ -190,16 +190,16 @@ def test_paths_between_free_configurations_are_free(frc, start, goal):
 # Poses and waypoints
 
 
-def test_waypoints_to_poses_and_back_is_the_identity(frc, seed_planner):
+def test_waypoints_to_poses_and_back_is_the_identity(frc, planner):
     goals = presets(frc)
     start = frc.plan([math.pi / 2, -math.pi / 2], goals['high_score']).waypoints_rad[-1]
     plan = frc.plan(start, goals['back_score'])
     rng = np.random.default_rng(2)
-    limits = seed_planner.forbidden.limits
+    limits = planner.forbidden.limits
     random_path = rng.uniform(limits[:, 0], limits[:, 1], (50, 2))
     crossing = np.radians([[170.0, 165.0], [190.0, -170.0], [199.0, 171.0], [-19.0, -171.0]])
-    for planner, path in ((frc, plan.waypoints_rad), (seed_planner, random_path),
-                          (seed_planner, crossing)):
+    for planner, path in ((frc, plan.waypoints_rad), (planner, random_path),
+                          (planner, crossing)):
         poses = poses_from_waypoints(planner.kinematics, path)
         assert all(-math.pi <= yaw < math.pi for _, _, yaw in poses)
         back = waypoints_from_poses(planner.kinematics, poses, path[0], planner.forbidden)
@@ -317,9 +317,9 @@ def test_no_clear_configuration_within_reach_is_none(arm):
     assert ForbiddenSpace(arm).nearest_clear((-0.349, 0.5), MARGIN_RAD, reach_rad=0.2) is None
 
 
-def test_a_goal_just_above_the_floor_is_still_planned(seed_planner):
+def test_a_goal_just_above_the_floor_is_still_planned(planner):
     """1 cm above the floor, inside the clearance a hold keeps: planned all the same."""
-    plan = seed_planner.plan((1.5, 1.0), (1.5, 0.01))
-    assert_free_path(seed_planner, plan)
-    assert seed_planner.kinematics.forward(plan.waypoints_rad[-1]) == pytest.approx(
+    plan = planner.plan((1.5, 1.0), (1.5, 0.01))
+    assert_free_path(planner, plan)
+    assert planner.kinematics.forward(plan.waypoints_rad[-1]) == pytest.approx(
         (1.5, 0.01), abs=1e-9)
