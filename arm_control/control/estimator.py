@@ -64,8 +64,12 @@ F_KEPT_RAD, F_KEPT_RAD_S, F_KEPT_V = 1e-3, 5e-2, 0.25
 
 # The last predictions kept with what they started from: a controller predicts the same
 # step twice (to when its command acts, then again from the reading it gets then, on the
-# same filter state and command), and takes the second from here.
+# same filter state and command), and takes the second from here. Its two ends are the same
+# robot instant found two ways (the learned loop, the reading's stamp): on a clock of ~1e9 s
+# they differ by rounding, ~1e-7 s; a step this much longer or shorter is the same step
+# (the state moves by ω times it).
 PREDICTIONS_KEPT = 4
+SAME_STEP_S = 1e-6
 
 _POSITION, _VELOCITY, _ZERO = slice(0, 2), slice(2, 4), slice(4, 6)
 
@@ -154,11 +158,12 @@ class ArmEstimator:
 
     def _predicted(self, asked) -> bool:
         """The filter put where a kept prediction took it, when that one began where the
-        filter is, bit for bit, with the same command, step, bus and supply: the same
-        numbers, not computed again."""
+        filter is, bit for bit, with the same command, bus and supply, over the same step
+        (within SAME_STEP_S): the same numbers, not computed again."""
         kf = self._kf
         for before, x_before, p_before, x_after, p_after in reversed(self._predictions):
-            if before[:3] == asked[:3] and before[3] is asked[3] and \
+            if before[0] == asked[0] and abs(before[1] - asked[1]) <= SAME_STEP_S and \
+                    before[2] == asked[2] and before[3] is asked[3] and \
                     np.array_equal(x_before, kf.x) and np.array_equal(p_before, kf.P):
                 kf.x, kf.P = x_after.copy(), p_after.copy()
                 return True

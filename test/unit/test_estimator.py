@@ -213,11 +213,12 @@ def test_a_kept_jacobian_leaves_the_estimate_as_it_was(arm, process_noise_rad_s2
     np.testing.assert_allclose(kept_std, new_std, rtol=1e-3)
 
 
-def test_a_step_predicted_again_is_taken_from_the_first_bit_for_bit(
-        arm, controller_config, planner, monkeypatch):
+def test_a_step_predicted_again_is_taken_from_the_first(arm, controller_config, planner,
+                                                        monkeypatch):
     """On the robot's clock the controller predicts each step twice (to when its command
     acts, then from the reading of that instant); kept, the second is not computed again,
-    and the arm moves exactly as when every prediction is computed, held and to a goal."""
+    and the arm moves as when every prediction is computed, held and to a goal, to 1e-11
+    (the two ends of a step agree to SAME_STEP_S)."""
     runs = []
     for kept in (estimator_module.PREDICTIONS_KEPT, 0):
         monkeypatch.setattr(estimator_module, 'PREDICTIONS_KEPT', kept)
@@ -232,5 +233,5 @@ def test_a_step_predicted_again_is_taken_from_the_first_bit_for_bit(
         loop.run(2.5)
         runs.append((np.array([state for _, state in loop.history]), len(computed)))
     (kept_states, kept_computed), (all_states, all_computed) = runs
-    np.testing.assert_array_equal(kept_states, all_states)
+    np.testing.assert_allclose(kept_states, all_states, rtol=0.0, atol=1e-11)
     assert kept_computed < 0.75 * all_computed
