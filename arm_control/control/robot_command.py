@@ -31,6 +31,7 @@ purpose (e-stop, e-stop again, disable) or nothing was sent before.
 """
 
 from collections import deque
+from functools import lru_cache
 import math
 import statistics
 
@@ -171,22 +172,45 @@ def profile_ahead(core, start_s: float, step_s: float) -> Profile:
     first = Setpoint(tuple(map(float, reference[:2])), tuple(map(float, reference[2:])),
                      tuple(map(float, core.tracking.feedforward_v + integral
                                + (1.0 - share) * proportional_derivative)))
-    stop_s = start_s + AHEAD * step_s
-    stop = core.setpoints.stopping(stop_s)
-    if stop is None:                         # no motion yet: the reference, held
-        return Profile(float(start_s), float(step_s), gains, (first,))
-    count = max(math.ceil((stop.end_s - stop_s) / step_s - 1e-9), 0) + 1
-    times = list(start_s + step_s * np.arange(1, AHEAD)) + \
-        list(stop_s + step_s * np.arange(count))
+    held_q = _held_q(core.setpoints, start_s)
+    if held_q is not None:                   # at rest from the start: every setpoint the hold
+        samples = [(held_q, np.zeros(2), np.zeros(2))] * AHEAD
+        volts = _hold_volts(core.tracking.feedforward.dynamics, tuple(held_q), AHEAD).copy()
+    else:
+        stop_s = start_s + AHEAD * step_s
+        stop = core.setpoints.stopping(stop_s)
+        if stop is None:                     # no motion yet: the reference, held
+            return Profile(float(start_s), float(step_s), gains, (first,))
+        count = max(math.ceil((stop.end_s - stop_s) / step_s - 1e-9), 0) + 1
+        times = list(start_s + step_s * np.arange(1, AHEAD)) + \
+            list(stop_s + step_s * np.arange(count))
 
-    def sample(t):
-        return core.setpoints.sample(t) if t < stop_s - 1e-9 else stop.sample(t)
-    samples = [sample(t) for t in times]
-    middles = [sample(t + 0.5 * step_s) for t in times]
-    middles[-1] = samples[-1] = (stop.final_q, np.zeros(2), np.zeros(2))   # held, at rest
-    volts = core.tracking.feedforward.dynamics.voltages(*(np.array(v) for v in zip(*middles)))
+        def sample(t):
+            return core.setpoints.sample(t) if t < stop_s - 1e-9 else stop.sample(t)
+        samples = [sample(t) for t in times]
+        middles = [sample(t + 0.5 * step_s) for t in times]
+        middles[-1] = samples[-1] = (stop.final_q, np.zeros(2), np.zeros(2))   # held, at rest
+        volts = core.tracking.feedforward.dynamics.voltages(*(np.array(v) for v in zip(*middles)))
     if AHEAD > 1:                            # setpoint 1: the step's next period
         volts[0] = core.tracking.feedforward.next_voltage + (1.0 - share) * proportional_derivative
     rest = [Setpoint(tuple(map(float, q)), tuple(map(float, qd)), tuple(map(float, v + integral)))
             for (q, qd, _), v in zip(samples, volts)]
     return Profile(float(start_s), float(step_s), gains, (first, *rest))
+
+
+def _held_q(setpoints, t_s: float):
+    """The angle the setpoints rest at from ``t_s`` on, when nothing moves them then (no
+    driver; the last motion began by ``t_s`` and is over): the profile's setpoints and their
+    middles are then all that hold, at rest, the last one the stop. Else None."""
+    last = setpoints.timeline.last
+    if setpoints.driving or last is None or last.begin_s > t_s or not last.finished(t_s):
+        return None
+    return last.final_q
+
+
+@lru_cache(maxsize=8)
+def _hold_volts(dynamics, q: tuple, count: int) -> np.ndarray:
+    """The inverse dynamics' volts holding ``q`` at rest, for ``count`` setpoints: as the
+    moving profile's (the same arrays), once per held angle."""
+    rows = np.tile(np.asarray(q, float), (count, 1))
+    return dynamics.voltages(rows, np.zeros((count, 2)), np.zeros((count, 2)))

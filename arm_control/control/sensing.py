@@ -39,6 +39,10 @@ TRUSTED_SOURCE_S = 0.1
 # (the sensors silent: no prediction grows without end; a later reading older than that is
 # folded in there).
 KEEP_PREDICTION_AFTER_S = 0.1
+# A command that acts within this of a reading's instant acts at it (s): the two are one
+# robot instant, found from the learned loop and from the stamp, apart by rounding on a clock
+# of ~1e9 s; a sliver of a step between them would cost a prediction for nothing.
+SAME_INSTANT_S = 1e-6
 
 
 @dataclass(frozen=True)
@@ -101,9 +105,9 @@ class Sensing:
         """The filter from ``from_s`` to ``to_s``, each command over the time it acted."""
         t, volts = from_s, self.held_v
         for start_s, command in self.commands:
-            if start_s >= to_s:
+            if start_s >= to_s - SAME_INSTANT_S:
                 break
-            if start_s > t:
+            if start_s > t + SAME_INSTANT_S:
                 self.estimator.predict(volts, start_s - t, self.supply, self.bus_voltage)
                 t = start_s
             volts = command

@@ -187,14 +187,19 @@ class Drained(CallbackGroup):
         pass
 
 
-def take_all(subscription, handler) -> None:
-    """Every message waiting in ``subscription``'s reader, oldest first, to ``handler``."""
+def take_all(subscription, handler, received=False) -> None:
+    """Every message waiting in ``subscription``'s reader, oldest first, to ``handler``;
+    ``received``: with the instant it reached this process too (ns of the system clock, 0
+    where the middleware does not say)."""
     while True:
         with subscription.handle:
             taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
         if taken is None:
             return
-        handler(taken[0])
+        if received:
+            handler(taken[0], int(taken[1].get('received_timestamp') or 0))
+        else:
+            handler(taken[0])
 
 
 def log_at(logger, level: str, text: str) -> None:

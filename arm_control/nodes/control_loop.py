@@ -52,8 +52,7 @@ class ControlLoop:
         self.priority_problem = None
         self.last_tick_s = None             # the clock's time at the last tick
         # Control time: the clock with its jumps taken out (``ClockGuard``).
-        self.guard = ClockGuard(lambda: (self.clock.now().nanoseconds * 1e-9,
-                                         time.monotonic()))
+        self.guard = ClockGuard(lambda: (self._clock_ns() * 1e-9, time.monotonic()))
         self.clock_stops = 0                # ticks on a reading, the clock stopped
         self._wake = threading.Event()
         self._stopping = False
@@ -61,6 +60,24 @@ class ControlLoop:
 
     def now_s(self) -> float:
         return self.guard.now_s()
+
+    def arrived_s(self, received_ns: int) -> float:
+        """When a message taken now had come, on control time: in real time the instant the
+        middleware received it (``received_ns``, the system clock's, as the node's), not
+        after now; in simulated time, or with no such instant, now."""
+        now = self.now_s()
+        if received_ns <= 0 or self.simulated():
+            return now
+        return min(now, self.guard.to_control_s(received_ns * 1e-9))
+
+    def _clock_ns(self) -> int:
+        """The clock's time (ns), as ``clock.now()``; from an rclpy clock's handle, without
+        making a Time of it (read several times a period)."""
+        handle = getattr(self.clock, 'handle', None)
+        if handle is None:
+            return self.clock.now().nanoseconds
+        with handle:
+            return handle.get_now().nanoseconds
 
     def started(self) -> bool:
         """The clock runs. With simulated time it reads 0 until the first /clock: a reading

@@ -1,15 +1,11 @@
 """The ``controller`` node: goals in, motor voltages out -- a shell around ArmController.
 
-Subscribes ``joint_states``, ``motor_encoders`` (JointState), ``battery_state`` (bus volts
-and current, for the estimate and the feedforward), ``goal_point`` (PointStamped: queued),
-``goal_preset`` (String: replaces the queue and the motion, as a driver's button) and
-``driver_velocity`` (TwistStamped: tool velocity in arm_base). Publishes ``voltage_command``
-every period, ``arm_state`` (latched), ``~/setpoint``, ``~/estimate``, ``~/goal_queue``
-(latched), ``~/events`` ("kind (cause): sentence"), ``/diagnostics`` and
-``voltage_command_claim`` (its claim to the arm: of two controllers the first keeps it, the
-other yields and sends nothing: ``claim_link``). Client of
-``plan_path``; serves ``~/estop``, ``~/reset``, ``~/cancel`` (Trigger), ``~/enable``
-(SetBool). Gains, reserves, tolerances, dwell and presets change at run time (``TUNABLE``).
+Subscribes ``joint_states``, ``motor_encoders`` (JointState) and ``battery_state`` (for the
+estimate and the feedforward); goals, presets, driver commands and services in
+``command_inputs``. Publishes ``voltage_command`` every period, ``arm_state`` (latched),
+``~/setpoint``, ``~/estimate``, ``~/goal_queue`` (latched), ``~/events`` ("kind (cause):
+sentence"), ``/diagnostics`` and ``voltage_command_claim`` (``claim_link``). Client of
+``plan_path``. Gains, reserves, tolerances, dwell and presets change at run time (``TUNABLE``).
 
 Three threads of work: the control loop (``ControlLoop``) steps the core and commands the
 motors; the executor takes messages and services (at ``EXECUTOR_PRIORITY``, below the loop);
@@ -102,8 +98,12 @@ class ControllerNode(Node):
         self.state_pub = output(self, String, 'arm_state', LATCHED)
         self.queue_pub = output(self, Path, '~/goal_queue', LATCHED)
         self.events_pub = output(self, String, '~/events', EVENTS)
-        self.create_subscription(JointState, 'joint_states', self.on_joint_states, STATE_STREAM)
-        # Taken as each joint_states arrives (a robot sends them first): ``Drained``.
+        # Taken by the loop's thread when it ticks (``take_readings``), not by the executor,
+        # which would wake 50 times a second to gather every entity of the node for them;
+        # the encoders and the bus as each joint_states is taken (a robot sends them first).
+        self.joint_states_sub = self.create_subscription(
+            JointState, 'joint_states', self.on_joint_states, STATE_STREAM,
+            callback_group=Drained())
         self.beside = [(self.create_subscription(kind, topic, handler, STATE_STREAM,
                                                  callback_group=Drained()), handler)
                        for topic, kind, handler in (
@@ -164,18 +164,26 @@ class ControllerNode(Node):
 
     # ------------------------------------------------------------------ messages in
 
+    def take_readings(self) -> None:
+        """In the loop's thread: the joint states that came since the last look."""
+        try:
+            take_all(self.joint_states_sub, self.on_joint_states, received=True)
+        except Exception as error:                  # the context going away beneath it
+            self.warn_bad(f'could not take joint_states: {error!r}')
+
     @guarded
-    def on_joint_states(self, msg: JointState) -> None:
+    def on_joint_states(self, msg: JointState, received_ns: int = 0) -> None:
         for subscription, handler in self.beside:
             take_all(subscription, handler)
         if not self.loop.started():
             return                                  # the sim's clock is not there yet
-        self.core.sensing.refuse_leaps |= self.count_publishers('joint_states') > 1
+        self.core.sensing.refuse_leaps |= self.joint_states_sub.get_publisher_count() > 1
         pair = messages.joint_readings(msg, MAX_ANGLE_RAD, self.core.sensing.max_leap_speed_rad_s)
         if isinstance(pair, str):
             return self.warn_bad(f'ignored joint_states: {pair}')
         position, velocity = pair
-        now, stamp = self.now_s(), self.loop.guard.to_control_s(messages.stamp_s(msg.header))
+        now = self.loop.arrived_s(received_ns)
+        stamp = self.loop.guard.to_control_s(messages.stamp_s(msg.header))
         age_s = now - stamp
         if math.isfinite(age_s):
             self.reading_ages_s.append(age_s)
@@ -235,6 +243,7 @@ class ControllerNode(Node):
 
     def has_reading(self, now_s: float) -> bool:
         """The joint states of ``now_s`` (simulated time: the sim's step) are in."""
+        self.take_readings()
         return any(taken >= now_s - 1e-6 for _, taken in self.readings)
 
     def watch_planner(self) -> None:
@@ -265,7 +274,9 @@ class ControllerNode(Node):
     # ------------------------------------------------------------------ the loop's thread
 
     def tick(self) -> None:
-        began, now = time.perf_counter(), self.now_s()
+        began = time.perf_counter()
+        self.take_readings()
+        now = self.now_s()
         readings, self.readings = self.readings, []
         for reading, _ in readings:
             self.commander.clock.observe(reading.sampled_s)
@@ -297,12 +308,21 @@ class ControllerNode(Node):
                 self.voltage_pub.publish(messages.voltage_command(self.last_command))
         if commanding:
             self.command_delay.sent(time.perf_counter() - began)
-            stamp = Time(nanoseconds=round(acts_s * 1e9)).to_msg()     # what they are for
-            self.setpoint_pub.publish(messages.joint_state(stamp, setpoint[0], setpoint[1]))
-            self.estimate_pub.publish(messages.joint_state(stamp, estimate[:2], estimate[2:]))
+            self.publish_states(acts_s, setpoint, estimate)
         if said:                                    # the executor publishes what changed
             self.outputs.trigger()
         self.watch.ticked(now, time.perf_counter() - began)
+
+    def publish_states(self, acts_s: float, setpoint, estimate) -> None:
+        """~/setpoint and ~/estimate, stamped with the instant they are for; built only for
+        a subscriber (each costs the loop a message a period)."""
+        stamp = None
+        for publisher, position, velocity in (
+                (self.setpoint_pub, setpoint[0], setpoint[1]),
+                (self.estimate_pub, estimate[:2], estimate[2:])):
+            if publisher.get_subscription_count():
+                stamp = stamp or Time(nanoseconds=round(acts_s * 1e9)).to_msg()
+                publisher.publish(messages.joint_state(stamp, position, velocity))
 
     def on_timed_plan(self, timed) -> None:
         """From the worker's result thread: the plan to the core, from when the next command

@@ -143,3 +143,18 @@ def test_a_clock_that_stops_while_readings_come_does_not_stop_the_ticks():
     finally:
         loop.stop()
     assert len(ticks) >= 3 and loop.clock_stops >= 2
+
+
+def test_a_reading_taken_late_is_timed_at_its_arrival_in_real_time_only():
+    """Readings are taken when the loop ticks: in real time each is timed when the middleware
+    received it (never after now), on control time; in simulated time, or with no reception
+    instant, at the tick."""
+    wall = SimClock(100.0)
+    wall.ros_time_is_active = False                 # the system clock, as the node's
+    loop = ControlLoop(wall, PERIOD_S, lambda: None)
+    now = loop.now_s()
+    assert loop.arrived_s(round((now - 0.015) * 1e9)) == pytest.approx(now - 0.015, abs=1e-9)
+    assert loop.arrived_s(round((now + 0.5) * 1e9)) == now      # a clock ahead: not later
+    assert loop.arrived_s(0) == now
+    simulated = ControlLoop(SimClock(100.0), PERIOD_S, lambda: None)
+    assert simulated.arrived_s(round(99.985e9)) == simulated.now_s()

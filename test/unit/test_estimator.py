@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from arm_control import config
+from arm_control.control import estimator as estimator_module
 from arm_control.control.estimator import ArmEstimator
+from arm_control.control.robot_loop import RobotLoop
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.plant import ArmPlant
 
@@ -170,3 +172,66 @@ def test_bad_input_is_refused_or_skipped(arm, process_noise_rad_s2):
     estimator.update([math.nan, -1.5708], [0.0, math.inf], [0.0, 0.0])   # only finite ones used
     assert np.all(np.isfinite(estimator.state))
     assert np.all(np.abs(estimator.state - before) < 0.05)
+
+
+def holding(t):
+    """The arm held still, forearm level: (q, q̇, q̈)."""
+    return np.array([1.5708, -1.5708]), np.zeros(2), np.zeros(2)
+
+
+@pytest.mark.parametrize('reference, most_kept', [(holding, 0.25), (swinging, 0.0)])
+def test_a_kept_jacobian_leaves_the_estimate_as_it_was(arm, process_noise_rad_s2, monkeypatch,
+                                                       reference, most_kept):
+    """∂f/∂x kept while the arm stays near where it was taken: a held arm takes it anew in
+    under three cycles of four (its command moves with the raw sensors' noise here), a
+    swinging one in every cycle; either way the estimate and its σ
+    are those of a filter that takes it anew every cycle, to well under the sensors' noise."""
+    made = []
+    jacobian = ArmEstimator._jacobian
+    monkeypatch.setattr(ArmEstimator, '_jacobian',
+                        staticmethod(lambda *args: made.append(1) or jacobian(*args)))
+    runs = []
+    for keep in (True, False):
+        loop = Loop(arm, process_noise_rad_s2, seed=5, reference=reference)
+        if not keep:
+            loop.estimator._f_kept = (0.0,) * 7
+        made.clear()
+        states, stds = [], []
+        for _ in range(250):
+            q, qd, qdd = reference(loop.t)          # PD on the sensors, no random volts
+            r = loop.reading
+            loop.step(np.array(loop.dynamics.voltage_for(q, qd, qdd))
+                      + KP_V_PER_RAD * (q - r.potentiometer_rad)
+                      + KD_V_S_PER_RAD * (qd - r.velocity_rad_s))
+            states.append(loop.estimator.state)
+            stds.append(np.sqrt(np.diag(loop.estimator.covariance)))
+        runs.append((np.array(states), np.array(stds), len(made)))
+    (kept_x, kept_std, kept_made), (new_x, new_std, new_made) = runs
+    assert new_made == 250
+    assert kept_made <= (1.0 - most_kept) * 250
+    np.testing.assert_allclose(kept_x, new_x, rtol=0.0, atol=1e-5)
+    np.testing.assert_allclose(kept_std, new_std, rtol=1e-3)
+
+
+def test_a_step_predicted_again_is_taken_from_the_first(arm, controller_config, planner,
+                                                        monkeypatch):
+    """On the robot's clock the controller predicts each step twice (to when its command
+    acts, then from the reading of that instant); kept, the second is not computed again,
+    and the arm moves as when every prediction is computed, held and to a goal, to 1e-11
+    (the two ends of a step agree to SAME_STEP_S)."""
+    runs = []
+    for kept in (estimator_module.PREDICTIONS_KEPT, 0):
+        monkeypatch.setattr(estimator_module, 'PREDICTIONS_KEPT', kept)
+        computed = []
+        loop = RobotLoop(arm, controller_config, planner, seed=4, phase_s=0.007)
+        estimator = loop.core.sensing.estimator
+        estimator._f_kept = (0.0,) * 7        # ∂f/∂x at every step: where the filter is
+        integrate = estimator._kf._integrate
+        estimator._kf._integrate = lambda x, u: computed.append(1) or integrate(x, u)
+        loop.run(0.5)
+        loop.submit_goal(1.1, 0.9)
+        loop.run(2.5)
+        runs.append((np.array([state for _, state in loop.history]), len(computed)))
+    (kept_states, kept_computed), (all_states, all_computed) = runs
+    np.testing.assert_allclose(kept_states, all_states, rtol=0.0, atol=1e-11)
+    assert kept_computed < 0.75 * all_computed

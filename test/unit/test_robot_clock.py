@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from arm_control.config import ControllerConfig, SimConfig
+from arm_control.control import robot_command
 from arm_control.control.robot_command import (AHEAD, ARRIVAL_MARGIN_S, profile_ahead,
                                                RobotClock)
 from arm_control.control.robot_loop import RobotLoop
@@ -149,6 +150,20 @@ def test_a_profile_from_a_hold_ends_at_rest_with_the_holding_volts(arm, controll
         first.feedforward_v, profile.gains, first.position_rad, estimate[:2],
         first.velocity_rad_s, estimate[2:])]
     assert volts == pytest.approx(list(core.voltage), abs=1e-9)
+
+
+def test_a_held_profile_is_the_one_a_moving_arm_would_get(arm, controller_config,
+                                                          monkeypatch):
+    """At rest the profile is built from the hold alone (no sampling of the motion, the
+    holding volts kept once per angle): exactly the profile the general rule gives."""
+    loop = _held_core(arm, controller_config)
+    core = loop.core
+    start_s = loop.clock.acting_at(loop.now_s)
+    core.step(start_s, loop.plant.read(), loop.now_s)
+    assert robot_command._held_q(core.setpoints, start_s) is not None
+    held = [profile_ahead(core, start_s, PERIOD_S) for _ in range(2)]
+    monkeypatch.setattr(robot_command, '_held_q', lambda setpoints, t_s: None)
+    assert held[0] == held[1] == profile_ahead(core, start_s, PERIOD_S)
 
 
 def test_a_profile_mid_move_stops_along_the_path_and_holds(arm, controller_config, planner):
