@@ -1,7 +1,6 @@
 """The ``controller`` node: goals in, motor voltages out -- a shell around ArmController.
 
-Subscribes ``joint_states``, ``motor_encoders`` (JointState) and ``battery_state`` (for the
-estimate and the feedforward); goals, presets, driver commands and services in
+Readings in ``sensor_inputs``; goals, presets, driver commands and services in
 ``command_inputs``. Publishes ``voltage_command`` every period, ``arm_state`` (latched),
 ``~/setpoint``, ``~/estimate``, ``~/goal_queue`` (latched), ``~/events`` ("kind (cause):
 sentence"), ``/diagnostics`` and ``voltage_command_claim`` (``claim_link``). Client of
@@ -15,7 +14,6 @@ core is shared under a lock held only for quick calls and the publishing of a co
 exit: its last profile again (a stop to rest, held), or 0 V sending volts or unpowered.
 """
 
-import math
 import signal
 import sys
 import threading
@@ -28,7 +26,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import uninstall_signal_handlers
 from rclpy.time import Time
-from sensor_msgs.msg import BatteryState, JointState
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
 from arm_control import realtime
@@ -38,18 +36,17 @@ from arm_control.control.input_gate import InputGate
 from arm_control.control.latency import CommandDelay
 from arm_control.control.live_settings import changed_names, controller_settings, TUNABLE
 from arm_control.control.robot_command import Commander
-from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.control.trust import TrustWatch
 from arm_control.nodes import messages
 from arm_control.nodes.claim_link import ClaimLink
 from arm_control.nodes.command_inputs import CommandInputs
-from arm_control.nodes.common import (COMMANDS, declare_parameters, Drained, guarded,
-                                      interrupt, LATCHED, log_at, output, run, STATE_STREAM,
-                                      take_all)
+from arm_control.nodes.common import (COMMANDS, declare_parameters, interrupt, LATCHED,
+                                      log_at, output, run, STATE_STREAM)
 from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.controller_watch import ControllerWatch
 from arm_control.nodes.plan_link import PlanLink
+from arm_control.nodes.sensor_inputs import SensorInputs
 from arm_control.nodes.trajectory_server import TrajectoryServer
 from arm_control.parameters import ParameterError
 
@@ -60,12 +57,7 @@ PLANNER_SETTLED_POLL_S = 0.5      # ... once it is, with nothing asked of it and
 # preempt it while it holds Python's lock, and the loop would then wait for the lock.
 EXECUTOR_PRIORITY = 1
 SHUTDOWN_ACK_S = 0.5              # at most this long on exit for the 0 V command to arrive
-# A reading is timed at its stamp when that is at most this long before its arrival, and
-# not after it (the stamp on this host's clock); else at its arrival.
-STAMP_TRUSTED_S = 0.05
-READINGS_KEPT = 4                 # joint_states kept for the next tick, the latest last
 EVENTS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-MAX_ANGLE_RAD = 4.0 * math.pi     # no sensor of this arm reads beyond two turns
 
 
 class ControllerNode(Node):
@@ -82,11 +74,8 @@ class ControllerNode(Node):
         self.trajectories = TrajectoryServer(self, params)     # FollowJointTrajectory, topic
         self.trust, self.gate = TrustWatch(self.core), InputGate()
         self.claims = ClaimLink(self)                       # who keeps the arm
-        # The latest reading for the loop, and the encoders and bus: (value, received at).
-        self.readings, self.encoders, self.bus = [], None, None
         self.bad_inputs = 0
         self.last_state = self.last_queue_version = None
-        self.reading_ages_s = []            # arrival minus stamp of each joint_states
         self.command_delay = CommandDelay(self.config.period_s)
         self.commander = Commander(self.config)     # what to send, for the robot's instants
         self.last_command = None                    # the last sent: a pair or a Profile
@@ -98,17 +87,7 @@ class ControllerNode(Node):
         self.state_pub = output(self, String, 'arm_state', LATCHED)
         self.queue_pub = output(self, Path, '~/goal_queue', LATCHED)
         self.events_pub = output(self, String, '~/events', EVENTS)
-        # Taken by the loop's thread when it ticks (``take_readings``), not by the executor,
-        # which would wake 50 times a second to gather every entity of the node for them;
-        # the encoders and the bus as each joint_states is taken (a robot sends them first).
-        self.joint_states_sub = self.create_subscription(
-            JointState, 'joint_states', self.on_joint_states, STATE_STREAM,
-            callback_group=Drained())
-        self.beside = [(self.create_subscription(kind, topic, handler, STATE_STREAM,
-                                                 callback_group=Drained()), handler)
-                       for topic, kind, handler in (
-                           ('motor_encoders', JointState, self.on_encoders),
-                           ('battery_state', BatteryState, self.on_battery))]
+        self.sensors = SensorInputs(self)  # joint states, encoders, bus: taken at a tick
         self.inputs = CommandInputs(self)   # goals, presets, driver commands, services
         self.outputs = self.create_guard_condition(self.publish_outputs)
         self.planner_ready = None
@@ -116,8 +95,8 @@ class ControllerNode(Node):
         self.watch = ControllerWatch(self)      # /diagnostics, who else is on the graph
         priority = self.config.realtime_priority
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
-                                self.get_logger().warning, self.has_reading, self.plans.busy,
-                                self.commander.tick_due)
+                                self.get_logger().warning, self.sensors.has_reading,
+                                self.plans.busy, self.commander.tick_due)
         # Not looked for yet: a goal that comes before the first look waits in the queue too.
         self.planner_ready = False
         self.command(self.core.on_planner_available, False)
@@ -164,61 +143,6 @@ class ControllerNode(Node):
 
     # ------------------------------------------------------------------ messages in
 
-    def take_readings(self) -> None:
-        """In the loop's thread: the joint states that came since the last look."""
-        try:
-            take_all(self.joint_states_sub, self.on_joint_states, received=True)
-        except Exception as error:                  # the context going away beneath it
-            self.warn_bad(f'could not take joint_states: {error!r}')
-
-    @guarded
-    def on_joint_states(self, msg: JointState, received_ns: int = 0) -> None:
-        for subscription, handler in self.beside:
-            take_all(subscription, handler)
-        if not self.loop.started():
-            return                                  # the sim's clock is not there yet
-        self.core.sensing.refuse_leaps |= self.joint_states_sub.get_publisher_count() > 1
-        pair = messages.joint_readings(msg, MAX_ANGLE_RAD, self.core.sensing.max_leap_speed_rad_s)
-        if isinstance(pair, str):
-            return self.warn_bad(f'ignored joint_states: {pair}')
-        position, velocity = pair
-        now = self.loop.arrived_s(received_ns)
-        stamp = self.loop.guard.to_control_s(messages.stamp_s(msg.header))
-        age_s = now - stamp
-        if math.isfinite(age_s):
-            self.reading_ages_s.append(age_s)
-
-        def fresh(latest, missing):
-            return latest[0] if latest is not None and \
-                now - latest[1] <= self.config.joint_state_timeout_s else missing
-        encoder = fresh(self.encoders, (math.nan, math.nan))
-        bus, supply_current = fresh(self.bus, (math.nan, math.nan))
-        # Taken at its stamp, when the sensors were read: timed at its arrival the estimate
-        # would lag the arm by the motion of the transit, and the feedback push it ahead. In
-        # simulated time the stamp is the clock's, which may not have reached it yet, or have
-        # jumped since.
-        trusted = 0.0 <= age_s <= STAMP_TRUSTED_S or (
-            self.loop.simulated() and abs(age_s) <= self.config.joint_state_timeout_s)
-        taken = stamp if trusted else now
-        # All since the last tick: beside a second publisher the latest was often its.
-        self.readings = self.readings[-(READINGS_KEPT - 1):] + [(SensorReading(
-            tuple(position), tuple(velocity), tuple(encoder), stamp, bus, supply_current), taken)]
-
-    @guarded
-    def on_encoders(self, msg: JointState) -> None:
-        position = messages.joint_pair(msg, 'position')
-        if position is None or not messages.within(position, MAX_ANGLE_RAD):
-            return self.warn_bad('ignored motor_encoders: expected finite positions of '
-                                 '[shoulder, elbow] within two turns')
-        self.encoders = (position, self.now_s())
-
-    @guarded
-    def on_battery(self, msg: BatteryState) -> None:
-        if not 0.0 < msg.voltage <= 2.0 * self.arm.battery.nominal_voltage:   # NaN too
-            return self.warn_bad(f'ignored battery_state: voltage {msg.voltage} V')
-        # BatteryState's current is negative while discharging; NaN when not reported.
-        self.bus = ((float(msg.voltage), -float(msg.current)), self.now_s())
-
     def on_parameters(self, params):
         """A run-time change: checked whole as at start (``controller_settings``), taken
         from the next period, or refused with the reason (the old values kept)."""
@@ -240,11 +164,6 @@ class ControllerNode(Node):
         self.settings, self.arm, self.config = settings, settings.arm, settings.config
         self.outputs.trigger()
         return None
-
-    def has_reading(self, now_s: float) -> bool:
-        """The joint states of ``now_s`` (simulated time: the sim's step) are in."""
-        self.take_readings()
-        return any(taken >= now_s - 1e-6 for _, taken in self.readings)
 
     def watch_planner(self) -> None:
         """Tell the core when the planner (and the timing worker) comes or goes; with no
@@ -275,9 +194,8 @@ class ControllerNode(Node):
 
     def tick(self) -> None:
         began = time.perf_counter()
-        self.take_readings()
+        readings = self.sensors.take_new()
         now = self.now_s()
-        readings, self.readings = self.readings, []
         for reading, _ in readings:
             self.commander.clock.observe(reading.sampled_s)
         if readings:

@@ -61,7 +61,7 @@ class ControllerWatch:
         node = self.node
         periods, self.loop_periods_s = self.loop_periods_s, []
         compute, self.loop_compute_s = self.loop_compute_s, []
-        ages, node.reading_ages_s = node.reading_ages_s, []
+        ages, node.sensors.reading_ages_s = node.sensors.reading_ages_s, []
         stats = loop_statistics(periods, compute)
         malformed, self.bad_inputs_said = node.bad_inputs - self.bad_inputs_said, node.bad_inputs
         problems = [text for bad, text in (

@@ -1,0 +1,117 @@
+"""The controller's readings: ``joint_states``, ``motor_encoders`` (JointState) and
+``battery_state`` (bus volts and current, for the estimate and the feedforward).
+
+Taken by the loop's thread when it ticks, not by the executor, which would wake 50 times a
+second to gather every entity of the node for them; the encoders and the bus as each
+joint_states is taken (a robot sends them first).
+"""
+
+import math
+
+from sensor_msgs.msg import BatteryState, JointState
+
+from arm_control.control.sensing import SensorReading
+from arm_control.nodes import messages
+from arm_control.nodes.common import Drained, guarded, STATE_STREAM, take_all
+
+# A reading is timed at its stamp when that is at most this long before its arrival, and
+# not after it (the stamp on this host's clock); else at its arrival.
+STAMP_TRUSTED_S = 0.05
+READINGS_KEPT = 4                 # joint_states kept for the next tick, the latest last
+MAX_ANGLE_RAD = 4.0 * math.pi     # no sensor of this arm reads beyond two turns
+
+
+class SensorInputs:
+    """The readings since the last tick (``take_new``), each with when it is taken to be."""
+
+    def __init__(self, node):
+        self.node = node
+        # The latest readings for the loop, and the encoders and bus: (value, received at).
+        self.readings, self.encoders, self.bus = [], None, None
+        self.reading_ages_s = []            # arrival minus stamp of each joint_states
+        self.joint_states_sub = node.create_subscription(
+            JointState, 'joint_states', self.on_joint_states, STATE_STREAM,
+            callback_group=Drained())
+        self.beside = [(node.create_subscription(kind, topic, handler, STATE_STREAM,
+                                                 callback_group=Drained()), handler)
+                       for topic, kind, handler in (
+                           ('motor_encoders', JointState, self.on_encoders),
+                           ('battery_state', BatteryState, self.on_battery))]
+
+    @property
+    def bad_inputs(self) -> int:        # ``guarded`` counts a failed callback on the node
+        return self.node.bad_inputs
+
+    @bad_inputs.setter
+    def bad_inputs(self, count: int) -> None:
+        self.node.bad_inputs = count
+
+    def get_logger(self):
+        return self.node.get_logger()
+
+    def take_new(self) -> list:
+        """In the loop's thread: the readings since the last call, oldest first."""
+        self.take_readings()
+        readings, self.readings = self.readings, []
+        return readings
+
+    def has_reading(self, now_s: float) -> bool:
+        """The joint states of ``now_s`` (simulated time: the sim's step) are in."""
+        self.take_readings()
+        return any(taken >= now_s - 1e-6 for _, taken in self.readings)
+
+    def take_readings(self) -> None:
+        """In the loop's thread: the joint states that came since the last look."""
+        try:
+            take_all(self.joint_states_sub, self.on_joint_states, received=True)
+        except Exception as error:                  # the context going away beneath it
+            self.node.warn_bad(f'could not take joint_states: {error!r}')
+
+    @guarded
+    def on_joint_states(self, msg: JointState, received_ns: int = 0) -> None:
+        for subscription, handler in self.beside:
+            take_all(subscription, handler)
+        if not self.node.loop.started():
+            return                                  # the sim's clock is not there yet
+        sensing = self.node.core.sensing
+        sensing.refuse_leaps |= self.joint_states_sub.get_publisher_count() > 1
+        pair = messages.joint_readings(msg, MAX_ANGLE_RAD, sensing.max_leap_speed_rad_s)
+        if isinstance(pair, str):
+            return self.node.warn_bad(f'ignored joint_states: {pair}')
+        position, velocity = pair
+        now = self.node.loop.arrived_s(received_ns)
+        stamp = self.node.loop.guard.to_control_s(messages.stamp_s(msg.header))
+        age_s = now - stamp
+        if math.isfinite(age_s):
+            self.reading_ages_s.append(age_s)
+
+        def fresh(latest, missing):
+            return latest[0] if latest is not None and \
+                now - latest[1] <= self.node.config.joint_state_timeout_s else missing
+        encoder = fresh(self.encoders, (math.nan, math.nan))
+        bus, supply_current = fresh(self.bus, (math.nan, math.nan))
+        # Taken at its stamp, when the sensors were read: timed at its arrival the estimate
+        # would lag the arm by the motion of the transit, and the feedback push it ahead. In
+        # simulated time the stamp is the clock's, which may not have reached it yet, or have
+        # jumped since.
+        trusted = 0.0 <= age_s <= STAMP_TRUSTED_S or (
+            self.node.loop.simulated() and abs(age_s) <= self.node.config.joint_state_timeout_s)
+        taken = stamp if trusted else now
+        # All since the last tick: beside a second publisher the latest was often its.
+        self.readings = self.readings[-(READINGS_KEPT - 1):] + [(SensorReading(
+            tuple(position), tuple(velocity), tuple(encoder), stamp, bus, supply_current), taken)]
+
+    @guarded
+    def on_encoders(self, msg: JointState) -> None:
+        position = messages.joint_pair(msg, 'position')
+        if position is None or not messages.within(position, MAX_ANGLE_RAD):
+            return self.node.warn_bad('ignored motor_encoders: expected finite positions '
+                                      'of [shoulder, elbow] within two turns')
+        self.encoders = (position, self.node.now_s())
+
+    @guarded
+    def on_battery(self, msg: BatteryState) -> None:
+        if not 0.0 < msg.voltage <= 2.0 * self.node.arm.battery.nominal_voltage:   # NaN too
+            return self.node.warn_bad(f'ignored battery_state: voltage {msg.voltage} V')
+        # BatteryState's current is negative while discharging; NaN when not reported.
+        self.bus = ((float(msg.voltage), -float(msg.current)), self.node.now_s())
