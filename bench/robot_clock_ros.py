@@ -27,8 +27,12 @@ from std_msgs.msg import Float64MultiArray
 
 from arm_control import config
 from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.realtime import raise_dds_threads
 
 HOLD_SETTLE_S = 1.0
+# The probe's DDS threads at the controller's executor priority: at normal priority under
+# load they wait in the run queue, and a command's arrival would be timed late.
+PROBE_DDS_PRIORITY = 1
 MOVING_RAD = 2e-4               # a profile moves: its setpoints' positions spread this far
 
 
@@ -95,6 +99,9 @@ def run(args, rows, suite) -> str:
             rig.ready(90.0)
             ros = RosMoves(rig, False)
             start = Start(rig)
+            problem = raise_dds_threads(PROBE_DDS_PRIORITY)
+            if problem:
+                print(problem, file=sys.stderr)
             speeds, swings = zip(*(hold(rig, ros, q) for q in robot_clock.HOLDS))
             row.hold_speed, row.hold_swing_deg = max(speeds), max(swings)
             for name, start_xy, goal_xy in suite:
