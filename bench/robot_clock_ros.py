@@ -11,8 +11,9 @@ Per move, from the probe (on the one host's clock): the sim's loop instants are 
 of its ``/joint_states`` (a reading per instant); the first at or after the goal's
 publication is where the robot's loop lets a move start at the soonest (a command sent the
 instant the goal was published, in no time, acts there). The move's start (``Start``): the
-first profile that moves, when it reached the probe (as it reaches the sim: the same DDS
-hop) and the instant the sim played it from (the first at or after its arrival).
+first profile that moves, when it reached the probe (DDS's receipt time, as it reaches the
+sim: the same hop; the probe's callback may run later under load) and the instant the sim
+played it from (the first at or after its arrival).
 """
 
 import math
@@ -45,16 +46,16 @@ class Start:
 
     def __init__(self, rig):
         node = rig.probe.node
-        self.now_s = lambda: node.get_clock().now().nanoseconds * 1e-9
         self.instants, self.profiles = [], []   # stamps s; (arrived s, its setpoints' spread)
         node.create_subscription(JointState, '/joint_states',
                                  lambda msg: self.instants.append(stamp_s(msg)), 100)
         node.create_subscription(Float64MultiArray, '/voltage_command', self.on_command, 100)
 
-    def on_command(self, msg) -> None:
-        if len(msg.data) >= 12:
+    def on_command(self, msg, info) -> None:
+        if len(msg.data) >= 12:         # received: the system clock, the clock of the stamps
             positions = np.reshape(msg.data[6:], (-1, 6))[:, :2]
-            self.profiles.append((self.now_s(), float(np.max(np.ptp(positions, axis=0)))))
+            self.profiles.append((1e-9 * info['received_timestamp'],
+                                  float(np.max(np.ptp(positions, axis=0)))))
 
     def first_instant(self, after_s: float) -> float:
         return min((t for t in self.instants if t >= after_s), default=math.nan)
