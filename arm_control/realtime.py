@@ -24,13 +24,24 @@ def _set_fifo(thread_id: int, priority: int) -> None:
 def raise_this_thread(priority: int) -> Optional[str]:
     """SCHED_FIFO at ``priority`` (1-98; 0: leave it) for the calling thread. None, or why
     it could not be done."""
+    return raise_thread(0, priority)        # 0: the calling thread, not the process
+
+
+def raise_thread(thread_id: int, priority: int) -> Optional[str]:
+    """SCHED_FIFO at ``priority`` (0: leave it) for the thread ``thread_id`` of this process
+    (``threading.Thread.native_id``). None, or why it could not be done."""
     if priority <= 0:
         return None
     try:
-        _set_fifo(0, priority)              # 0: the calling thread, not the process
+        _set_fifo(thread_id, priority)
     except OSError as error:
         return f'real-time priority {priority} refused ({error.strerror}): {HOW_TO_ALLOW}'
     return None
+
+
+def lower_this_thread() -> None:
+    """The calling thread back to normal scheduling."""
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
 @contextmanager
@@ -44,7 +55,7 @@ def raised(priority: int):
         yield problem
     finally:
         if priority > 0 and problem is None:
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+            lower_this_thread()
 
 
 def raise_process(priority: int) -> Optional[str]:

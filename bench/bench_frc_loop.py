@@ -198,9 +198,13 @@ def goal(copro, robot, name, x, y) -> dict:
     swing = np.max(np.ptp(held[:, :2], axis=0)) if len(held) else np.inf
     volts = np.array([r.applied_voltage_v for us, r in list(robot.published.items())
                       if us * 1e-6 > from_s]).reshape(-1, 2)
+    # Where in the hold the swing was: its first 0.5 s (the end of settling) or after.
+    later = np.array([s for t, s in robot.truth if t > from_s + 0.5])
+    swing_later = np.max(np.ptp(later[:, :2], axis=0)) if len(later) else np.inf
     return {'name': name, 'reached': reached, 'move_s': move_s, 'speed': speed,
-            'swing': swing, 'held': reached and speed < HOLD_SPEED_RAD_S and
-            swing < HOLD_SWING_RAD, 'volts_ptp': np.ptp(volts, axis=0) if len(volts) else ()}
+            'swing': swing, 'swing_later': swing_later, 'held': reached and
+            speed < HOLD_SPEED_RAD_S and swing < HOLD_SWING_RAD,
+            'volts_ptp': np.ptp(volts, axis=0) if len(volts) else ()}
 
 
 def disable(copro, robot) -> tuple[float, float]:
@@ -254,7 +258,8 @@ def run_phase(copro, robot, phase_ms, presets, load, reference=False) -> str:
         file=sys.stderr)
     for m in moves:
         print(f"  {m['name']}: move {m['move_s']:.2f} s, held speed {m['speed']:.3f}, "
-              f"swing {np.degrees(m['swing']):.2f} deg, applied V range "
+              f"swing {np.degrees(m['swing']):.2f} deg (after its first 0.5 s "
+              f"{np.degrees(m['swing_later']):.2f}), reached {m['reached']}, applied V range "
               f"{np.round(m['volts_ptp'], 2)}", file=sys.stderr)
     arrivals = robot.arrivals[arrivals_from:]
     transit_out = [1e-3 * (arrived - sent) for arrived, sent in arrivals]

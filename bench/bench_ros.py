@@ -166,7 +166,7 @@ class RosMoves:
         events = [e for e in rig.events_heard(began) if parse_event(e)[0] in outcome]
         rows = np.array([row for row in self.truth if row[0] >= published_s - 0.05])
         kind, _, sentence = parse_event(events[0]) if events else ('none', '', '')
-        return {'outcome': kind, 'sentence': sentence,
+        return {'outcome': kind, 'sentence': sentence, 'published_s': published_s,
                 'ros_s': settled_s(rows[:, 0], rows[:, 1:], published_s) if len(rows) else
                 math.nan,
                 'q': rows[:, 1:] if len(rows) else np.zeros((0, 2)),

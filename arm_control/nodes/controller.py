@@ -7,11 +7,12 @@ sentence"), ``/diagnostics`` and ``voltage_command_claim`` (``claim_link``). Cli
 ``plan_path``. Gains, reserves, tolerances, dwell and presets change at run time (``TUNABLE``).
 
 Three threads of work: the control loop (``ControlLoop``) steps the core and commands the
-motors; the executor takes messages and services (at ``EXECUTOR_PRIORITY``, below the loop);
-a worker process times plans, and its keeper keeps fine trajectories (``PlanLink``). The
-core is shared under a lock held only for quick calls and the publishing of a command
-(a write that DDS blocks holds Python's own lock too: the process waits either way). On
-exit: its last profile again (a stop to rest, held), or 0 V sending volts or unpowered.
+motors; the executor takes messages and services (at ``EXECUTOR_PRIORITY``, below the loop,
+as is the thread that hands the core its timed plans); a worker process times plans, and
+its keeper keeps fine trajectories (``PlanLink``). The core is shared under a lock held only
+for quick calls and the publishing of a command (a write that DDS blocks holds Python's own
+lock too: the process waits either way). On exit: its last profile again (a stop to rest,
+held), or 0 V sending volts or unpowered.
 """
 
 import signal
@@ -104,6 +105,7 @@ class ControllerNode(Node):
         if priority:         # this thread spins the executor (where refused, the loop said so)
             realtime.raise_this_thread(EXECUTOR_PRIORITY)
             realtime.raise_dds_threads(EXECUTOR_PRIORITY)   # which receive what it takes
+            realtime.raise_thread(self.plans.worker.results_thread_id, EXECUTOR_PRIORITY)
         self.get_logger().info(f'controlling the arm at {self.config.loop_rate_hz:g} Hz'
                                f'{f" at real-time priority {priority}" if priority else ""}; '
                                'waiting for joint_states')
@@ -252,11 +254,17 @@ class ControllerNode(Node):
     # ------------------------------------------------------------------ outputs
 
     def publish_outputs(self) -> None:
-        """In the executor: events, state and queue as they changed; plan requests out."""
+        """In the executor: plan requests out first (the arm waits for them, and a log line
+        and messages sent before them delay every goal), then events, state and queue as
+        they changed."""
         with self.lock:
             news = self.core.take_news()
         events, state, pending = news.events, news.state, news.goals
         version, requests = news.queue_version, news.plan_requests
+        if requests:
+            self.plans.let_keeper_work(False)      # a goal to plan: not while it moves
+            self.plans.send(requests)
+            self.poll_planner(False)
         for event in events:
             self.events_pub.publish(String(data=str(event)))
             log_at(self.get_logger(), event.level, str(event))
@@ -269,10 +277,6 @@ class ControllerNode(Node):
             path.poses = [messages.pose_stamped(g.x_m, g.y_m, 0.0, path.header)
                           for g in pending]
             self.queue_pub.publish(path)
-        if requests:
-            self.plans.let_keeper_work(False)      # a goal to plan: not while it moves
-            self.plans.send(requests)
-            self.poll_planner(False)
 
     def on_shutdown(self) -> None:
         """The last word: sending profiles and powered, the last profile again (it ends at

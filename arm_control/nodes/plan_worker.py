@@ -40,6 +40,7 @@ from arm_control.control.plan_messages import (Done, KeeperJob, KeeperResult, Ke
                                                Ready, Settings, TimedPlan, TimePlan)
 from arm_control.control.plans import PlanTimer
 from arm_control.nodes.worker_spawn import spawn, take_started
+from arm_control.realtime import lower_this_thread, raise_this_thread
 from arm_control.timing.bus import compile_kernels
 
 
@@ -53,31 +54,43 @@ KEEPER_QUEUE = 256
 def _serve(requests: Connection, results: Connection) -> None:
     """The worker (``plan_messages``): times each plan with the latest ``Settings``, the
     answers from rest in two (the quick one, then its refinement), then says the request
-    ``Done``; hands the keeper the paths worth keeping and keeps what it times."""
+    ``Done``; hands the keeper the paths worth keeping and keeps what it times. It waits for
+    the next item at ``planning_priority`` and keeps it for a goal's quick timing only
+    (``answer``): at normal priority, beside busy processes, a goal's request waited in the
+    run queue before it was even read; the rest (settings, keeping, warm-up, refining) runs
+    at normal."""
     compile_kernels()               # loaded from numba's cache (or compiled) while it waits
     timer = warm_up = None
     clock = HandoverClock()
     incoming = _Incoming(requests)
     keeping = _Keeping()
+    priority = 0                    # the latest settings' planning_priority
     try:
         while True:
             if warm_up is not None and not incoming.waiting and not requests.poll():
                 warm_up = warm_up if warm_up.step(timer, clock) else None
                 continue
+            listening = priority > 0 and raise_this_thread(priority) is None
             keeper = keeping.keeper
             if not incoming.waiting and keeper is not None \
                     and requests not in wait([requests, keeper.results]):
+                if listening:
+                    lower_this_thread()
                 done = keeping.take()
                 if done is not None:
                     timer.kept.add(done.request, done.plan, done.trajectory, done.pinned)
                     results.send(Kept(len(timer.kept)))
                 continue
-            match incoming.next():
+            item = incoming.next()
+            if listening and not isinstance(item, TimePlan):    # answer() lowers after
+                lower_this_thread()
+            match item:
                 case None:
                     return
                 case Settings(arm, config) as settings:
                     first = timer is None
                     timer = PlanTimer(arm, config)
+                    priority = config.planning_priority
                     keeping.retune(settings)
                     results.send(Kept(0))
                     if first:
@@ -351,6 +364,11 @@ class PlanWorker:
                     self.kept = count
                 case TimedPlan():
                     self.on_timed(message)
+
+    @property
+    def results_thread_id(self) -> int:
+        """The thread that hands each timed plan to ``on_timed`` (its ``native_id``)."""
+        return self._thread.native_id
 
     @property
     def alive(self) -> bool:

@@ -1,6 +1,6 @@
 """The controller node in process: before it has first looked for the planner, a goal waits
 in the queue like one that comes while it looks; once it has yielded the arm to another
-controller, it takes no settings."""
+controller, it takes no settings; a goal's plan request goes out before what it said."""
 
 import os
 
@@ -47,6 +47,35 @@ def test_a_controller_that_yielded_refuses_settings_and_keeps_its_own(domain):
         node.claims.yielding = False
         result = node.set_parameters([Parameter('shoulder_pid', value=[1.0, 0.0, 0.0])])[0]
         assert result.successful, result.reason
+    finally:
+        if node is not None:
+            node.loop.stop()
+            node.plans.close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def test_a_plan_request_goes_out_before_the_goal_s_events(domain):
+    """The arm waits for the plan, nobody waits for the events: the request is sent first,
+    then the events (each also a log line), state and queue."""
+    rclpy.init(args=['--ros-args', '-p', 'realtime_priority:=0'], domain_id=domain)
+    node = None
+    try:
+        node = ControllerNode()
+        node.publish_outputs()                      # what the start said is out of the way
+        order = []
+        node.core.events.say(0.0, Kind.GOAL_QUEUED, 'info', 'goal queued')
+        node.core.take_plan_requests = lambda: ['a request']
+        node.plans.send = lambda requests: order.append(('request', tuple(requests)))
+        publish = node.events_pub.publish
+
+        def publish_event(message):
+            order.append(('event', message.data))
+            publish(message)
+        node.events_pub.publish = publish_event
+        node.publish_outputs()
+        assert [kind for kind, _ in order] == ['request', 'event']
+        assert order[0][1] == ('a request',)
     finally:
         if node is not None:
             node.loop.stop()

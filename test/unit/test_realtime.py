@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from arm_control.realtime import dds_threads, raise_dds_threads, raised
+from arm_control.realtime import dds_threads, raise_dds_threads, raise_thread, raised
 
 
 def in_a_thread(work):
@@ -102,3 +102,30 @@ def test_raising_no_dds_threads_at_priority_zero_does_nothing(tmp_path):
     (tmp_path / '13' / 'comm').write_text('python\n')
     assert dds_threads(str(tmp_path)) == [12]
     assert raise_dds_threads(0, str(tmp_path)) is None
+
+
+def test_another_thread_is_raised_by_its_id_and_the_caller_left_alone():
+    """``raise_thread``: the thread named by its native id goes to SCHED_FIFO (the
+    controller raises its plan-results thread so), not the one that asks."""
+    started, done = threading.Event(), threading.Event()
+    ids = {}
+
+    def other():
+        ids['other'] = threading.get_native_id()
+        started.set()
+        done.wait(10.0)
+    thread = threading.Thread(target=other)
+    thread.start()
+    try:
+        assert started.wait(10.0)
+        problem = raise_thread(ids['other'], 6)
+        if problem is None:
+            assert os.sched_getscheduler(ids['other']) == os.SCHED_FIFO
+            assert os.sched_getparam(ids['other']).sched_priority == 6
+        else:                                   # no rtprio limit nor CAP_SYS_NICE here
+            assert 'rtprio' in problem
+        assert policy() == os.SCHED_OTHER
+        assert raise_thread(ids['other'], 0) is None
+    finally:
+        done.set()
+        thread.join(10.0)
