@@ -51,12 +51,12 @@ def namespaced_parameter_files(files, namespace: str, folder) -> list[Path]:
     namespace = namespace.strip('/')
     out = []
     for index, path in enumerate(files):
-        document = yaml.safe_load(Path(path).read_text()) or {}
+        document = yaml.safe_load(Path(path).read_text(encoding='utf-8')) or {}
         moved = {}
         for key, body in document.items():
             node_name = key.strip('/')
             moved[key if '*' in key or '/' in node_name else f'/{namespace}/{node_name}'] = body
         copy = Path(folder) / f'{index}_{Path(path).name}'
-        copy.write_text(yaml.safe_dump(moved, sort_keys=False))
+        copy.write_text(yaml.safe_dump(moved, sort_keys=False), encoding='utf-8')
         out.append(copy)
     return out

@@ -36,7 +36,7 @@ def _document(path):
     """The parsed file (libyaml's parser where there is one: ten times faster at start-up)."""
     loader = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
     try:
-        return yaml.load(Path(path).read_text(), Loader=loader)
+        return yaml.load(Path(path).read_text(encoding='utf-8'), Loader=loader)
     except (OSError, yaml.YAMLError) as error:
         raise ParameterError(f'cannot read parameter file {path}: {error}') from error
 
@@ -87,7 +87,7 @@ def parameter_descriptions(path, node_name: str) -> dict[str, str]:
     """
     by_section: dict[str, dict[str, str]] = {}
     stack: list[tuple[int, str, str]] = []      # (indent, key, comment) of open sections
-    for line in Path(path).read_text().splitlines():
+    for line in Path(path).read_text(encoding='utf-8').splitlines():
         match = re.match(r'^(\s*)([\w/*]+):\s*([^#]*?)\s*(?:#\s*(.*))?$', line)
         if not match:
             continue

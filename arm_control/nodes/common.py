@@ -241,8 +241,8 @@ def _parameters_without_value(argv) -> list:
     names = []
     for flag, path in zip(argv, argv[1:]):
         try:
-            document = yaml.safe_load(Path(path).read_text()) if flag == '--params-file' \
-                else None
+            document = yaml.safe_load(Path(path).read_text(encoding='utf-8')) \
+                if flag == '--params-file' else None
         except (OSError, yaml.YAMLError):
             continue
         for section in document.values() if isinstance(document, dict) else ():

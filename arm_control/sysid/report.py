@@ -233,10 +233,11 @@ def identify(log: Log, nominal: ArmConfig, settings: SysIdConfig, directory, sou
     parameter_file = None
     if realisation is not None:
         parameter_file = directory / 'identified_params.yaml'
-        parameter_file.write_text(overlay_yaml(realisation, fit, nominal, source))
+        parameter_file.write_text(overlay_yaml(realisation, fit, nominal, source),
+                                  encoding='utf-8')
     report_file = directory / 'report.md'
     report_file.write_text(report_markdown(fit, realisation, nominal, source, notes,
-                                           quality=quality))
+                                           quality=quality), encoding='utf-8')
     plot_file = directory / 'fit.png'
     plot_fit(fit, plot_file, title=f'sysid: {source}')
     return Identification(fit, realisation, error, parameter_file, report_file, plot_file)

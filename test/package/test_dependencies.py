@@ -89,7 +89,7 @@ def imported_modules(root: Path, folders) -> dict[str, list[str]]:
                                for path in (root / folder).rglob('*.py')}
     found: dict[str, list[str]] = {}
     for path in files:
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'), str(path))):
             if isinstance(node, ast.Import):
                 names = [alias.name for alias in node.names]
             elif isinstance(node, ast.ImportFrom) and node.level == 0:
