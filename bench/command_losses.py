@@ -24,6 +24,7 @@ import numpy as np  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.controller import ArmController  # noqa: E402
+from arm_control.control.plan_port import plan_in_process  # noqa: E402
 from arm_control.control.state_machine import ArmState  # noqa: E402
 from arm_control.model.plant import ArmPlant  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
@@ -36,7 +37,7 @@ LOSSES_S = (0.3, 0.5)
 
 
 def one_run(arm, controller, planner_config, start_xy, goal_xy, into_s, lost_s):
-    core = ArmController(arm, controller, Planner(arm, planner_config))
+    core = plan_in_process(ArmController(arm, controller), Planner(arm, planner_config))
     plant = ArmPlant(arm, START, seed=6)
     period_s = 1.0 / controller.loop_rate_hz
     core.submit_goal(plant.time_s, *start_xy)

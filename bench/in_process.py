@@ -16,6 +16,7 @@ import time
 import numpy as np
 
 from arm_control.control.controller import ArmController
+from arm_control.control.plan_port import InProcessPlanning
 from arm_control.model.plant import ArmPlant
 
 HOLD_BEFORE_S = 0.5
@@ -25,13 +26,15 @@ PHYSICS_MS = 1                    # the plant's step and the recording's
 
 
 class PlanHandOff:
-    """The core's planner hand-off (``take_plan_requests`` → ``plan_and_time`` →
-    ``on_timed_plan``). Each request is planned at once; the plan is ready after the CPU
-    time that took (path + branch choice + timing) and is taken then, by an extra control
-    cycle (``at_next_tick`` False), or only at the next regular tick (True)."""
+    """The core's requests (``take_plan_requests``) sent to ``InProcessPlanning``, whose
+    answers go to ``on_timed_plan`` after the CPU time they took (path + branch choice +
+    timing): by an extra control cycle (``at_next_tick`` False), or only at the next
+    regular tick (True)."""
 
     def __init__(self, core, planner, at_next_tick=False):
-        self.core, self.planner, self.at_next_tick = core, planner, at_next_tick
+        self.core, self.at_next_tick = core, at_next_tick
+        self.answers = []             # from the planning, not yet ready
+        self.planning = InProcessPlanning(core, planner, self.answers.append)
         self.waiting = []             # (ready at, timed plan)
         self.plan_cpu_s, self.plan_wall_s = [], []
         self.delivered_s = math.nan
@@ -39,8 +42,9 @@ class PlanHandOff:
     def after_step(self, now_s):
         for request in self.core.take_plan_requests():
             cpu, wall = time.thread_time(), time.perf_counter()
-            timed = self.core.plan_timer.plan_and_time(request, self.planner)
+            self.planning.send([request])
             cpu, wall = time.thread_time() - cpu, time.perf_counter() - wall
+            timed = self.answers.pop()
             self.plan_cpu_s.append(cpu)
             self.plan_wall_s.append(wall)
             ready = now_s + math.ceil(cpu * 1000.0 / PHYSICS_MS) * PHYSICS_MS / 1000.0

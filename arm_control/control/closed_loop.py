@@ -12,6 +12,7 @@ import numpy as np
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind
+from arm_control.control.plan_port import plan_in_process
 from arm_control.control.state_machine import ArmState
 from arm_control.model.plant import ArmPlant
 from arm_control.model.world import ForbiddenSpace
@@ -20,7 +21,7 @@ from arm_control.model.world import ForbiddenSpace
 class ClosedLoop:
     """The plant and the core, stepped together at the control rate.
 
-    ``planner``: given to the core, which then plans and times in its own step (anything
+    ``planner``: the core plans with it in-process (``plan_port.InProcessPlanning``: anything
     with ``plan(start_q, goal_xy)``, e.g. ``planning.planner.Planner``). ``observers`` are
     called after every step with (loop, reading, voltage). ``command_delay_s``: each command
     acts this long after its tick, as through ROS; the core is told so (its step is for
@@ -35,7 +36,7 @@ class ClosedLoop:
                  told_delay: bool = True, reading_age_s: float = 0.0, told_age: bool = True):
         self.arm = arm
         self.plant = ArmPlant(arm, start, physics_step_s, seed)
-        self.core = ArmController(arm, controller_config, planner)
+        self.core = plan_in_process(ArmController(arm, controller_config), planner)
         self.period_s = controller_config.period_s
         self.command_delay_s, self.told_delay = command_delay_s, told_delay
         self.reading_age_s, self.told_age = reading_age_s, told_age

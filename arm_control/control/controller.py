@@ -18,11 +18,12 @@ Each period the node (or a test, or a benchmark) calls ``step(now_s, reading)``;
 ``step`` returns a ``port.Step`` (the volts, the state, the events, the plan requests);
 ``take_news`` gives the publisher what changed. Callers read those, not the core's parts.
 
-Planning is asynchronous: starting a goal emits a ``PlanRequest`` (``take_plan_requests``)
-and the answer comes back as a ``TimedPlan`` through ``on_timed_plan`` -- timed elsewhere
-(``plans.PlanTimer``, in the node's worker process). With a ``planner`` object given (tests,
-benchmarks in simulated time) the core plans and times in its own step. No plan within
-``planner_timeout_s``: the goal fails with the reason -- never a blind move.
+The core does not plan: starting a goal emits a ``PlanRequest`` and the answer comes back as
+a ``TimedPlan`` through ``on_timed_plan``, from one ``plan_port.Planning`` -- in-process
+(tests, benchmarks) or ``PlanLink`` (the node). A ``planning`` set on the core is handed
+the requests in the step that asks them; without one the caller takes them
+(``take_news``). No plan within ``planner_timeout_s``: the goal fails with the reason --
+never a blind move.
 """
 
 from dataclasses import replace
@@ -53,8 +54,9 @@ class ArmController:
     """Estimation, supervision, control and safety; the goals run by a ``GoalRunner``. One
     ``step`` per control period returns the voltage to apply [Va, Vb] in a ``Step``."""
 
-    def __init__(self, arm: ArmConfig, config: ControllerConfig, planner=None):
-        self.arm, self.config, self.planner = arm, config, planner
+    def __init__(self, arm: ArmConfig, config: ControllerConfig, planning=None):
+        self.arm, self.config = arm, config
+        self.planning = planning      # a ``plan_port.Planning``, or None: ``take_news``
         self.period_s = config.period_s
         self.plan_timer = PlanTimer(arm, config)
         dynamics, self.forbidden = self.plan_timer.dynamics, self.plan_timer.forbidden
@@ -225,10 +227,8 @@ class ArmController:
             self.sensing.update(now_s, earlier_reading, earlier_s, self.voltage)
         self.sensing.update(now_s, reading, reading_time_s, self.voltage)
         self._supervise(now_s)
-        pending = self.goals.plans.pending
-        if pending is not None and self.planner is not None:
-            self.goals.take_requests()
-            self.on_timed_plan(now_s, self.plan_timer.plan_and_time(pending, self.planner))
+        if self.planning is not None and self.goals.plans.requests:
+            self.planning.send(self.goals.take_requests())
         self.events.flush(now_s)
         if self.unpowered:
             self.tracking.stop()

@@ -21,6 +21,7 @@ import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.controller import ArmController
+from arm_control.control.plan_port import plan_in_process
 from arm_control.control.robot_command import Commander
 from arm_control.model.plant import ArmPlant
 from arm_control.model.profile import Profile, ProfilePlayer
@@ -40,7 +41,7 @@ class RobotLoop:
         if mode not in MODES:
             raise ValueError(f'mode {mode!r}: expected one of {MODES}')
         self.plant = ArmPlant(arm, start, 0.001 * STEP_MS, seed)
-        self.core = ArmController(arm, controller_config, planner)
+        self.core = plan_in_process(ArmController(arm, controller_config), planner)
         self.mode, self.robot_loop = mode, robot_loop
         self.period_ms = round(1000.0 * controller_config.period_s)
         self.phase_ms = round(1000.0 * phase_s) % self.period_ms

@@ -41,8 +41,9 @@ PRESET_CALLS = 3
 
 
 class PlanLink:
-    """One node's planner client and timing worker; made first thing at the node's start,
-    so that finding the planner and starting the worker go on while the rest is built."""
+    """One node's planner client and timing worker (the node's ``plan_port.Planning``:
+    ``send``, answers to ``on_timed``); made first thing at the node's start, so that
+    finding the planner and starting the worker go on while the rest is built."""
 
     def __init__(self, node, arm, config, on_timed):
         self.node = node

@@ -18,6 +18,7 @@ from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.goals import StraightLinePlanner
 from arm_control.control.plan_messages import PlanRequest
+from arm_control.control.plan_port import InProcessPlanning
 from arm_control.control.state_machine import ArmState
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
@@ -401,7 +402,9 @@ def test_timed_moves_keep_the_clearance_from_forbidden_space(arm, controller_con
             if not padded.is_free(start):
                 continue
             request = PlanRequest(1, goal, tuple(start), (0.0, 0.0), None, 0.0)
-            timed = core.plan_timer.plan_and_time(request, world_planner)
+            answers = []
+            InProcessPlanning(core, world_planner, answers.append).send([request])
+            timed, = answers
             assert timed.ok, timed.reason
             trajectory = timed.trajectory
             times = np.linspace(0.0, trajectory.duration_s, 1000)

@@ -18,6 +18,7 @@ from arm_control import config
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.goals import GoalValidator
+from arm_control.control.plan_port import plan_in_process
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.model.plant import ArmPlant
@@ -76,7 +77,8 @@ def test_an_arm_that_cannot_follow_is_estopped_however_many_goals_come(arm,
     0.2 s): leaving a plan it is far off, to plan again, must not keep the tracking-error
     rule from stopping an arm that cannot follow."""
     heavy = dataclasses.replace(arm, elbow=dataclasses.replace(arm.elbow, mass_kg=120.0))
-    core = ArmController(arm, controller_config, Planner(arm, config.load('planner')[1]))
+    core = plan_in_process(ArmController(arm, controller_config),
+                           Planner(arm, config.load('planner')[1]))
     plant = ArmPlant(heavy, START, seed=3)
     period_s = 1.0 / controller_config.loop_rate_hz
     for index in range(20):
@@ -127,7 +129,8 @@ def test_a_stall_that_froze_the_arm_too_brakes_or_rejoins_then_reaches_the_goal(
     again, where that straight line is free; here, over the top towards the floor behind,
     it is not, and the plan goes on from where the arm is on it. It stays out of the floor
     and gets there."""
-    core = ArmController(arm, controller_config, Planner(arm, config.load('planner')[1]))
+    core = plan_in_process(ArmController(arm, controller_config),
+                           Planner(arm, config.load('planner')[1]))
     plant = ArmPlant(arm, START, seed=5)
     period_s = 1.0 / controller_config.loop_rate_hz
     core.submit_goal(plant.time_s, -1.0, 1.0)                  # front to back, over the top
@@ -158,7 +161,8 @@ def test_commands_lost_mid_move_then_the_arm_is_brought_back_not_dropped(arm, co
     controller does, applies 0 V after 0.1 s without one). The arm falls behind a plan at
     the motors' limits; it is brought back (braked from where it is, the goal planned again
     from there), not dropped by the tracking-error rule, and it never touches the floor."""
-    core = ArmController(arm, controller_config, Planner(arm, config.load('planner')[1]))
+    core = plan_in_process(ArmController(arm, controller_config),
+                           Planner(arm, config.load('planner')[1]))
     plant = ArmPlant(arm, START, seed=6)
     period_s = 1.0 / controller_config.loop_rate_hz
     core.submit_goal(plant.time_s, 1.1, 0.9)
@@ -186,7 +190,8 @@ def test_a_move_whose_first_commands_are_held_up_waits_for_the_arm_and_keeps_off
     (up and over, to full reach 0.1 m above the floor): the shoulder, at its motors' limit,
     cannot make that up. Driven to catch up, the arm came to the plan's braking faster than
     the plan and went 0.39 m into the floor; the plan waits for it instead."""
-    core = ArmController(arm, controller_config, Planner(arm, config.load('planner')[1]))
+    core = plan_in_process(ArmController(arm, controller_config),
+                           Planner(arm, config.load('planner')[1]))
     plant = ArmPlant(arm, GoalValidator(arm).free_configurations(1.6, 0.1)[0], seed=0)
     period_s = 1.0 / controller_config.loop_rate_hz
     run(core, plant, 0.5, period_s)
