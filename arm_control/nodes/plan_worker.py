@@ -55,10 +55,10 @@ def _serve(requests: Connection, results: Connection) -> None:
     """The worker (``plan_messages``): times each plan with the latest ``Settings``, the
     answers from rest in two (the quick one, then its refinement), then says the request
     ``Done``; hands the keeper the paths worth keeping and keeps what it times. It waits for
-    the next item at ``planning_priority`` and keeps it for a goal's quick timing only
-    (``answer``): at normal priority, beside busy processes, a goal's request waited in the
-    run queue before it was even read; the rest (settings, keeping, warm-up, refining) runs
-    at normal."""
+    the next item at ``planning_priority`` and keeps it for a goal's quick timing and its
+    refinement only (``answer``): at normal priority, beside busy processes, a goal's request
+    waited in the run queue before it was even read; the rest (settings, keeping, warm-up)
+    runs at normal."""
     compile_kernels()               # loaded from numba's cache (or compiled) while it waits
     timer = warm_up = None
     clock = HandoverClock()
