@@ -68,9 +68,6 @@ MAX_CATCH_UP_S = 0.03
 LOCKSTEP_WAIT_S = 0.5
 # ... and begins no sooner than its wall time, less this (a timer's jitter).
 WALL_SLACK_S = 0.0002
-# SCHED_FIFO of the threads DDS receives the commands in, when the sim runs at real-time
-# priority: a command waiting behind busy processes acts a robot loop later than it arrived.
-RECEIVE_PRIORITY = 1
 
 
 class SimNode(Node):
@@ -135,8 +132,6 @@ class SimNode(Node):
             self.create_timer(1.0, self.publish_diagnostics)
         priority = self.config.realtime_priority
         self.priority_problem = realtime.raise_this_thread(priority)   # the one that steps
-        if priority:            # the DDS threads that receive the commands: above the busy
-            realtime.raise_dds_threads(RECEIVE_PRIORITY)      # processes, below the step
         self.get_logger().info(
             f'simulating the arm at {self.config.publish_rate_hz:g} Hz from '
             f'[{self.config.initial_position[0]:.3f}, {self.config.initial_position[1]:.3f}] rad'

@@ -294,16 +294,14 @@ def test_live_tuning_takes_good_values_and_refuses_bad_ones(launch, probe):
     assert np.linalg.norm(xy[-1] - (0.6, 1.6)) < 0.031
 
 
-@pytest.mark.parametrize('name', ['controller', 'sim'])
-def test_the_node_receives_at_real_time_priority(launch, probe, name):
-    """A reading (the controller's) or a command (the sim's) must not wait behind busy
-    processes before the node takes it: the DDS threads (Fast DDS's ``dds.*``, which receive)
-    are SCHED_FIFO at the lowest priority, below the node's loop; where the system refuses,
-    the node says how to allow it."""
+def test_the_controller_receives_at_its_executor_s_priority(launch, probe):
+    """A reading must not wait behind busy processes before the executor takes it: the
+    controller's DDS threads (Fast DDS's ``dds.*``, which receive) are SCHED_FIFO at the
+    executor's priority, below its loop; where the system refuses, the node says how to
+    allow it."""
     from arm_control.nodes.controller import EXECUTOR_PRIORITY
-    from arm_control.nodes.sim import RECEIVE_PRIORITY
-    node = launch(name)
-    tasks = f'/proc/{node.process.pid}/task'
+    controller = launch('controller')
+    tasks = f'/proc/{controller.process.pid}/task'
 
     def dds_policies():
         found = set()
@@ -314,12 +312,12 @@ def test_the_node_receives_at_real_time_priority(launch, probe, name):
             except ProcessLookupError:                      # a thread that ended meanwhile
                 pass
         return found
-    fifo = {(os.SCHED_FIFO, EXECUTOR_PRIORITY if name == 'controller' else RECEIVE_PRIORITY)}
+    fifo = {(os.SCHED_FIFO, EXECUTOR_PRIORITY)}
 
-    def refused():                  # the loop's priority refused: the receivers' is too
-        return 'refused' in node.output()
+    def refused():                  # the loop's priority refused: the executor's is too
+        return 'refused' in controller.output()
     assert probe.spin_until(lambda: dds_policies() == fifo or refused(), 30.0), dds_policies()
     if refused():
-        assert 'rtprio' in node.output()                    # how to allow it
+        assert 'rtprio' in controller.output()              # how to allow it
     else:
         assert dds_policies() == fifo
