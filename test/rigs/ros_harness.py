@@ -7,6 +7,7 @@ parallel runs on one machine never hear each other; discovery stays on localhost
 import contextlib
 import ctypes
 import fcntl
+import itertools
 import os
 from pathlib import Path
 import signal
@@ -25,6 +26,7 @@ PACKAGE = 'arm_control'
 os.environ.update(localhost_udp_environment())
 DOMAIN_IDS = range(1, 102)       # 0 is the default everyone shares; 101 is the last safe one
 PR_SET_PDEATHSIG = 1             # prctl(2)
+_TURNS = itertools.count(0, 7)   # each ros_domain() of this process starts its search further on
 RESEND_S = 3.0                   # an idempotent call unanswered this long is sent again
 
 
@@ -49,7 +51,9 @@ def ros_domain():
     """An unused ROS_DOMAIN_ID, locked against other test processes until released."""
     lock_dir = Path(tempfile.gettempdir()) / 'arm_control_ros_domains'
     lock_dir.mkdir(exist_ok=True)
-    start = os.getpid() % len(DOMAIN_IDS)
+    # A domain of its own for each test in turn, not the one the last test released: a node
+    # of the last test still going away must not be heard by the next.
+    start = (os.getpid() + next(_TURNS)) % len(DOMAIN_IDS)
     for offset in range(len(DOMAIN_IDS)):
         domain = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
         handle = open(lock_dir / f'{domain}.lock', 'w')
