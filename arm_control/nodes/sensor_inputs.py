@@ -1,9 +1,8 @@
 """The controller's readings: ``joint_states``, ``motor_encoders`` (JointState) and
 ``battery_state`` (bus volts and current, for the estimate and the feedforward).
 
-Taken by the loop's thread when it ticks, not by the executor, which would wake 50 times a
-second to gather every entity of the node for them; the encoders and the bus as each
-joint_states is taken (a robot sends them first).
+joint_states in the executor's thread as each arrives; the encoders and the bus as each
+joint_states is taken (a robot sends them first); the loop takes what came at its tick.
 """
 
 import math
@@ -29,9 +28,11 @@ class SensorInputs:
         # The latest readings for the loop, and the encoders and bus: (value, received at).
         self.readings, self.encoders, self.bus = [], None, None
         self.reading_ages_s = []            # arrival minus stamp of each joint_states
+        # In the executor's thread, as each arrives: an rcl subscription is not to be taken
+        # from by one thread while another waits on it (a controller taking joint_states in
+        # its loop's thread died of a corrupted heap beside two busy loops).
         self.joint_states_sub = node.create_subscription(
-            JointState, 'joint_states', self.on_joint_states, STATE_STREAM,
-            callback_group=Drained())
+            JointState, 'joint_states', self.on_joint_states, STATE_STREAM)
         self.beside = [(node.create_subscription(kind, topic, handler, STATE_STREAM,
                                                  callback_group=Drained()), handler)
                        for topic, kind, handler in (
@@ -51,21 +52,12 @@ class SensorInputs:
 
     def take_new(self) -> list:
         """In the loop's thread: the readings since the last call, oldest first."""
-        self.take_readings()
         readings, self.readings = self.readings, []
         return readings
 
     def has_reading(self, now_s: float) -> bool:
         """The joint states of ``now_s`` (simulated time: the sim's step) are in."""
-        self.take_readings()
         return any(taken >= now_s - 1e-6 for _, taken in self.readings)
-
-    def take_readings(self) -> None:
-        """In the loop's thread: the joint states that came since the last look."""
-        try:
-            take_all(self.joint_states_sub, self.on_joint_states, received=True)
-        except Exception as error:                  # the context going away beneath it
-            self.node.warn_bad(f'could not take joint_states: {error!r}')
 
     @guarded
     def on_joint_states(self, msg: JointState, received_ns: int = 0) -> None:
