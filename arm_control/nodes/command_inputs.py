@@ -15,13 +15,13 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from arm_control.nodes import messages
-from arm_control.nodes.common import guarded
+from arm_control.nodes.common import guarded, NodePart
 
 # Goals, presets, driver commands kept until taken: answered or counted (``InputGate``).
 GOALS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 
 
-class CommandInputs:
+class CommandInputs(NodePart):
     """Goals, presets, driver commands and services, on their way to the core."""
 
     def __init__(self, node):
@@ -38,17 +38,6 @@ class CommandInputs:
                                 self.on_service(response, call))
         node.create_service(SetBool, '~/enable', lambda request, response: self.on_service(
             response, core.enable, bool(request.data)))
-
-    @property
-    def bad_inputs(self) -> int:        # ``guarded`` counts a failed callback on the node
-        return self.node.bad_inputs
-
-    @bad_inputs.setter
-    def bad_inputs(self, count: int) -> None:
-        self.node.bad_inputs = count
-
-    def get_logger(self):
-        return self.node.get_logger()
 
     @guarded
     def on_goal_point(self, msg: PointStamped) -> None:

@@ -144,6 +144,22 @@ def controller_sees_planner(message: DiagnosticArray,
     return None
 
 
+class NodePart:
+    """A part of a node (its ``node``) whose ``guarded`` callbacks count a failure and log it
+    on the node."""
+
+    @property
+    def bad_inputs(self) -> int:        # ``guarded`` counts a failed callback on the node
+        return self.node.bad_inputs
+
+    @bad_inputs.setter
+    def bad_inputs(self, count: int) -> None:
+        self.node.bad_inputs = count
+
+    def get_logger(self):
+        return self.node.get_logger()
+
+
 def guarded(callback):
     """A callback that logs what it raises instead of stopping the node: no message, however
     malformed, may take a node down (a service still answers, unsuccessfully)."""

@@ -8,14 +8,15 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
 from arm_control.control.health import diagnostics, health, loop_values, trust_values
 from arm_control.control.trust import GraphCounts
-from arm_control.nodes.common import guarded, loop_statistics, output, PLANNER_AVAILABLE, status
+from arm_control.nodes.common import (guarded, loop_statistics, NodePart, output,
+                                      PLANNER_AVAILABLE, status)
 
 GRAPH_WATCH_S = 0.5               # how often to count who else publishes its topics
 LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
           'error': DiagnosticStatus.ERROR}
 
 
-class ControllerWatch:
+class ControllerWatch(NodePart):
     """The loop's timings since the last report, and the reports."""
 
     def __init__(self, node):
@@ -25,17 +26,6 @@ class ControllerWatch:
         self.diagnostics_pub = output(node, DiagnosticArray, '/diagnostics', 10)
         node.create_timer(1.0, self.publish_diagnostics)
         node.create_timer(GRAPH_WATCH_S, self.watch_graph)
-
-    @property
-    def bad_inputs(self) -> int:        # ``guarded`` counts a failed callback on the node
-        return self.node.bad_inputs
-
-    @bad_inputs.setter
-    def bad_inputs(self, count: int) -> None:
-        self.node.bad_inputs = count
-
-    def get_logger(self):
-        return self.node.get_logger()
 
     def ticked(self, now: float, compute_s: float) -> None:
         """A tick of the loop at ``now`` (control time), its work ``compute_s`` long."""

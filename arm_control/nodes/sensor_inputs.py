@@ -11,7 +11,7 @@ from sensor_msgs.msg import BatteryState, JointState
 
 from arm_control.control.sensing import SensorReading
 from arm_control.nodes import messages
-from arm_control.nodes.common import Drained, guarded, STATE_STREAM, take_all
+from arm_control.nodes.common import Drained, guarded, NodePart, STATE_STREAM, take_all
 
 # A reading is timed at its stamp when that is at most this long before its arrival, and
 # not after it (the stamp on this host's clock); else at its arrival.
@@ -20,7 +20,7 @@ READINGS_KEPT = 4                 # joint_states kept for the next tick, the lat
 MAX_ANGLE_RAD = 4.0 * math.pi     # no sensor of this arm reads beyond two turns
 
 
-class SensorInputs:
+class SensorInputs(NodePart):
     """The readings since the last tick (``take_new``), each with when it is taken to be."""
 
     def __init__(self, node):
@@ -38,17 +38,6 @@ class SensorInputs:
                        for topic, kind, handler in (
                            ('motor_encoders', JointState, self.on_encoders),
                            ('battery_state', BatteryState, self.on_battery))]
-
-    @property
-    def bad_inputs(self) -> int:        # ``guarded`` counts a failed callback on the node
-        return self.node.bad_inputs
-
-    @bad_inputs.setter
-    def bad_inputs(self, count: int) -> None:
-        self.node.bad_inputs = count
-
-    def get_logger(self):
-        return self.node.get_logger()
 
     def take_new(self) -> list:
         """In the loop's thread: the readings since the last call, oldest first."""

@@ -30,7 +30,7 @@ from arm_control.control.motions import Motion
 from arm_control.control.state_machine import STOPPED
 from arm_control.control.trajectory_goals import FollowSettings, TrajectoryGoals, TrajectoryWatch
 from arm_control.nodes import messages
-from arm_control.nodes.common import COMMANDS, guarded
+from arm_control.nodes.common import COMMANDS, guarded, NodePart
 from arm_control.timing.bus import compile_kernels
 
 try:
@@ -85,7 +85,7 @@ class Active:
     begun_s: float          # when it was handed to the core (what the core says since)
 
 
-class TrajectoryServer:
+class TrajectoryServer(NodePart):
     """The action server and the topic, on the controller node (its core, lock, clock)."""
 
     def __init__(self, node, params):
@@ -113,17 +113,6 @@ class TrajectoryServer:
         # Only while a goal is followed: an idle timer would wake the executor 20 times a second.
         self.monitor_timer = node.create_timer(1.0 / MONITOR_RATE_HZ, self.monitor)
         self.monitor_timer.cancel()
-
-    @property
-    def bad_inputs(self) -> int:        # ``guarded`` counts a failed callback on the node
-        return self.node.bad_inputs
-
-    @bad_inputs.setter
-    def bad_inputs(self, count: int) -> None:
-        self.node.bad_inputs = count
-
-    def get_logger(self):
-        return self.node.get_logger()
 
     def command(self, call, *args):
         """``call(now, *args)`` on the core under the node's lock, from any thread (none of
