@@ -10,16 +10,12 @@ reachable annulus. Subscribes the same topics as the ``viewer``; publishes on ea
 import math
 import sys
 
-from geometry_msgs.msg import PointStamped
-from nav_msgs.msg import Path
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
-from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from arm_control.config import ArmConfig
-from arm_control.nodes import messages
-from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, STATE_STREAM
+from arm_control.nodes.common import declare_parameters, run, STATE_STREAM
+from arm_control.nodes.view_inputs import ViewInputs
 from arm_control.parameters import ParameterError
 from arm_control.visual.markers import MarkerBuilder
 from arm_control.visual.viewer_model import ViewerModel
@@ -40,41 +36,13 @@ class MarkersNode(Node):
         self.model = ViewerModel(self.arm)
         self.builder = MarkerBuilder(self.arm)
         self.markers_pub = self.create_publisher(MarkerArray, 'arm_markers', STATE_STREAM)
-        self.create_subscription(JointState, 'joint_states', self.on_joint_states, STATE_STREAM)
-        self.create_subscription(JointState, 'controller/setpoint', self.on_setpoint,
-                                 STATE_STREAM)
-        self.create_subscription(String, 'arm_state', self.on_state, LATCHED)
-        self.create_subscription(Path, 'planned_path', self.on_path, LATCHED)
-        self.create_subscription(PointStamped, 'goal_point', self.on_goal, COMMANDS)
+        self.inputs = ViewInputs(self, self.model, self.publish_markers)
 
-    def now_s(self) -> float:
-        """The node's clock (simulated time with use_sim_time), in seconds."""
-        return self.get_clock().now().nanoseconds * 1e-9
-
-    def _refused(self, why) -> None:
-        if why:
-            self.get_logger().warning(why, throttle_duration_sec=2.0)
-
-    def on_joint_states(self, msg: JointState) -> None:
-        now = self.now_s()
-        why = self.model.on_joint_state((messages.joint_pair(msg) or []), now)
-        self._refused(why)
-        if why is None and now - self.last_publish_s >= self.min_period_s:
-            self.last_publish_s = now
-            self.markers_pub.publish(self.builder.build(self.model.scene(now),
+    def publish_markers(self, now_s: float) -> None:
+        if now_s - self.last_publish_s >= self.min_period_s:
+            self.last_publish_s = now_s
+            self.markers_pub.publish(self.builder.build(self.model.scene(now_s),
                                                         self.get_clock().now().to_msg()))
-
-    def on_setpoint(self, msg: JointState) -> None:
-        self._refused(self.model.on_setpoint((messages.joint_pair(msg) or [])))
-
-    def on_state(self, msg: String) -> None:
-        self.model.on_state(msg.data)
-
-    def on_path(self, msg: Path) -> None:
-        self._refused(self.model.on_path(messages.poses_of(msg)))
-
-    def on_goal(self, msg: PointStamped) -> None:
-        self.model.on_goal(msg.point.x, msg.point.y, msg.point.z, msg.header.frame_id)
 
 
 def main(args=None):

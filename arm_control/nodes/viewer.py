@@ -11,14 +11,12 @@ import os
 import sys
 
 from geometry_msgs.msg import PointStamped
-from nav_msgs.msg import OccupancyGrid, Path
+from nav_msgs.msg import OccupancyGrid
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
-from std_msgs.msg import String
 
 from arm_control.config import ArmConfig, FRAME_ID
-from arm_control.nodes import messages
-from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run, STATE_STREAM
+from arm_control.nodes.common import COMMANDS, declare_parameters, LATCHED, run
+from arm_control.nodes.view_inputs import ViewInputs
 from arm_control.visual.scene import cspace_from_occupancy, workspace_extent
 from arm_control.visual.scene_view import SceneView
 from arm_control.visual.viewer_model import ViewerConfig, ViewerModel
@@ -50,13 +48,8 @@ class ViewerNode(Node):
         self.view = SceneView(self.arm, figure=figure)
 
         self.goal_pub = self.create_publisher(PointStamped, 'goal_point', COMMANDS)
-        self.create_subscription(JointState, 'joint_states', self.on_joint_states, STATE_STREAM)
-        self.create_subscription(JointState, 'controller/setpoint', self.on_setpoint,
-                                 STATE_STREAM)
-        self.create_subscription(String, 'arm_state', self.on_state, LATCHED)
-        self.create_subscription(Path, 'planned_path', self.on_path, LATCHED)
+        self.inputs = ViewInputs(self, self.model)
         self.create_subscription(OccupancyGrid, 'cspace_map', self.on_cspace_map, LATCHED)
-        self.create_subscription(PointStamped, 'goal_point', self.on_goal, COMMANDS)
 
         if self.headless:
             self.create_timer(1.0 / self.config.png_rate_hz, self.write_png)
@@ -73,10 +66,6 @@ class ViewerNode(Node):
             self.create_timer(1.0 / self.config.rate_hz, self.refresh_window)
             self.get_logger().info('viewer window open: click to send a goal_point')
 
-    def now_s(self) -> float:
-        """The node's clock (simulated time with use_sim_time), in seconds."""
-        return self.get_clock().now().nanoseconds * 1e-9
-
     def _open_window(self):
         import matplotlib
         matplotlib.use('TkAgg')
@@ -89,28 +78,6 @@ class ViewerNode(Node):
         return figure
 
     # -- messages in ---------------------------------------------------------------------
-
-    def _refused(self, why) -> None:
-        if why:
-            self.get_logger().warning(why, throttle_duration_sec=2.0)
-
-    def on_joint_states(self, msg: JointState) -> None:
-        self._refused(self.model.on_joint_state(messages.joint_pair(msg) or [],
-                                                self.now_s()))
-
-    def on_setpoint(self, msg: JointState) -> None:
-        self._refused(self.model.on_setpoint((messages.joint_pair(msg) or [])))
-
-    def on_state(self, msg: String) -> None:
-        self.model.on_state(msg.data)
-
-    def on_path(self, msg: Path) -> None:
-        self._refused(self.model.on_path(messages.poses_of(msg)))
-
-    def on_goal(self, msg: PointStamped) -> None:
-        why = self.model.on_goal(msg.point.x, msg.point.y, msg.point.z, msg.header.frame_id)
-        if why:
-            self.get_logger().info(f'not shown as queued: {why}', throttle_duration_sec=2.0)
 
     def on_cspace_map(self, msg: OccupancyGrid) -> None:
         info = msg.info
@@ -150,14 +117,14 @@ class ViewerNode(Node):
             self.get_logger().info('window closed: stopping')
             self.context.try_shutdown()         # rclpy.spin returns; run() cleans up
             return
-        self.view.draw_live(self.model.scene(self.now_s()))
+        self.view.draw_live(self.model.scene(self.inputs.now_s()))
         self.view.figure.canvas.flush_events()
 
     def write_png(self) -> None:
         path = self.config.png_path
         partial = f'{path}.part'
         try:
-            self.view.render_png(self.model.scene(self.now_s()), partial)
+            self.view.render_png(self.model.scene(self.inputs.now_s()), partial)
             os.replace(partial, path)          # readers never see half a picture
         except OSError as error:
             self.get_logger().error(f'cannot write {path}: {error}', throttle_duration_sec=10.0)
