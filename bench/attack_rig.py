@@ -12,8 +12,9 @@ import time
 HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE)]
 
-from arm_rig import ArmRig, flood_goals, point, START_Q  # noqa: E402
+from arm_rig import ArmRig, point, START_Q  # noqa: E402
 from geometry_msgs.msg import PointStamped, TwistStamped  # noqa: E402
+from goal_flood import flood_goals  # noqa: E402
 import numpy as np  # noqa: E402
 from rcl_interfaces.srv import SetParameters  # noqa: E402
 import rclpy  # noqa: E402

@@ -41,13 +41,14 @@ import time
 HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent / 'test' / 'rigs'), str(HERE)]
 
-from arm_rig import ArmRig, BAD_GOALS, flood_goals, START_Q  # noqa: E402
+from arm_rig import ArmRig, BAD_GOALS, START_Q  # noqa: E402
 from attack_rig import (ANSWERS, ARM, Bench, BIG, Listener, LISTENER_PRIORITY,  # noqa: E402
                         LOAD_BUDGET_S, lowest_points_mm, period_ms, point_of, PRESETS,
                         READY_TIMEOUT_S, short, SIM, y_lowest_m)
 import attacks_live  # noqa: E402
 import busy  # noqa: E402
 import docs_table  # noqa: E402
+from goal_flood import flood_goals  # noqa: E402
 import numpy as np  # noqa: E402
 from ros_harness import NodeProcess, Probe, ros_domain  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402

@@ -12,7 +12,8 @@ One launch for the module: the tests run in order on the same three processes.
 import math
 import time
 
-from arm_rig import assert_never_forbidden, BAD_GOALS, DEG, periods, start_flood
+from arm_rig import assert_never_forbidden, BAD_GOALS, DEG, periods
+from goal_flood import start_flood
 import numpy as np
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
