@@ -23,7 +23,6 @@ from rclpy.task import Future
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from arm_control.config import JOINT_NAMES
-from arm_control.control.goals import Goal
 from arm_control.control.joint_trajectory import (ErrorCode, JointTolerance, TrajectoryPoint,
                                                   TrajectoryRefused, TrajectoryRequest)
 from arm_control.control.motions import Motion
@@ -31,6 +30,7 @@ from arm_control.control.state_machine import STOPPED
 from arm_control.control.trajectory_goals import FollowSettings, TrajectoryGoals, TrajectoryWatch
 from arm_control.nodes import messages
 from arm_control.nodes.common import COMMANDS, guarded, NodePart
+from arm_control.plans.goals import Goal
 from arm_control.timing.bus import compile_kernels
 
 try:

@@ -18,15 +18,15 @@ import pytest
 
 from arm_control import config
 from arm_control.control.closed_loop import ClosedLoop
-from arm_control.control.goals import Goal
-from arm_control.control.plan_caches import KeptTrajectories, preset_pairs
-from arm_control.control.plan_messages import Keeping, KeepPath, PathPlan, PlanRequest, TimePlan
-from arm_control.control.plans import BranchRanking, PlanTimer
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.plan_worker import _Incoming, PlanWorker
 from arm_control.planning.poses import poses_from_waypoints, waypoints_from_poses
+from arm_control.plans.cache import KeptTrajectories, preset_pairs
+from arm_control.plans.goals import Goal
+from arm_control.plans.messages import Keeping, KeepPath, PathPlan, PlanRequest, TimePlan
+from arm_control.plans.timer import BranchRanking, PlanTimer
 from arm_control.timing import (bus, exact, refined_trajectory, time_optimal_trajectory,
                                 TrajectoryLimits)
 from arm_control.timing.bus import compile_kernels, exact_timing

@@ -25,8 +25,8 @@ import math
 
 import numpy as np
 
-from arm_control.control.goals import GoalValidator
-from arm_control.control.plan_messages import PlanRequest
+from arm_control.plans.goals import GoalValidator
+from arm_control.plans.messages import PlanRequest
 
 # A request is one worked out ahead (``PresetAnswers``), or finds a kept trajectory
 # (``KeptTrajectories``: its path's waypoints too), when its start is within this of that
@@ -114,7 +114,7 @@ class PresetAnswers:
 
     ``pending`` lists what is left to work out (each preset branch as a start, toward every
     other preset), ``prepare_next`` works out one; ``plan`` answers any request, from the
-    store when its start and goal are one of these. ``ranking``: a ``plans.BranchRanking``."""
+    store when its start and goal are one of these. ``ranking``: a ``timer.BranchRanking``."""
 
     def __init__(self, ranking, planner):
         self.ranking, self.planner = ranking, planner
