@@ -29,7 +29,7 @@ from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
 from arm_control.model.world import ForbiddenSpace
-from arm_control.plans.cache import KeptTrajectories
+from arm_control.plans.cache import KeptTrajectories, PlanCache
 from arm_control.plans.goals import GoalValidator
 from arm_control.plans.messages import PlanRequest, TimedPlan
 from arm_control.timing import (estimated_bent_duration_s, estimated_duration_s,
@@ -66,15 +66,15 @@ class PlanTimer:
         self.clear_space = ForbiddenSpace(arm, arm.world.clearance_rad)
         self.limits = TrajectoryLimits.from_config(arm, config)
         self.ranking = BranchRanking(arm)
-        self.kept = KeptTrajectories()
+        self.cache = PlanCache()           # the worker's side: kept trajectories
 
     def time_plan(self, request: PlanRequest, plan, quick: bool = False) -> TimedPlan:
         """Check ``plan`` (anything with ``ok``, ``reason`` and ``waypoints_rad``) against the
         request and time it; ``quick``: from rest, on few stages and not bent (``refine``
         makes it better from a little later) -- or, for a goal that comes again from rest
-        along the same path, the fine trajectory kept from the last time (``kept``)."""
+        along the same path, the fine trajectory kept from the last time (``cache``)."""
         started = time.perf_counter()
-        kept = self.kept.find(request, plan)
+        kept = self.cache.trajectory(request, plan)
         if kept is not None:
             return TimedPlan(request, kept, compute_s=time.perf_counter() - started, kept=True)
         try:

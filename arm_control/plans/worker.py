@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from arm_control.plans.cache import Serves
 from arm_control.plans.goals import Goal
 from arm_control.plans.messages import (Done, KeeperJob, KeeperResult, KeeperSettings,
                                         Keeping, KeepPath, Kept, PathPlan, PlanRequest,
@@ -63,17 +64,17 @@ def answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, s
     """Time ``plan`` for ``request`` and ``send`` the answer; from rest, the quick one, then
     (unless ``newer()``: another request waits) its refinement. True: a path from rest worth
     timing finely and keeping."""
-    from_rest = request.start_time_s is None
+    quick = timer.cache.serves(request, plan) is Serves.QUICK_THEN_FINE
     began = time.perf_counter()
     try:
         with raised(timer.config.planning_priority):     # the arm waits for this one
-            timed = timer.time_plan(request, plan, quick=from_rest)
+            timed = timer.time_plan(request, plan, quick=quick)
     except Exception as error:              # never leave a goal hanging
         timed = TimedPlan(request, None, f'timing the plan failed: {error!r}')
     send(timed)
     sent = time.perf_counter()
     quick_s = sent - began
-    if not (from_rest and timed.ok) or timed.kept:
+    if not (quick and timed.ok):
         return False
     if newer():
         return True
@@ -180,15 +181,15 @@ class Worker:
             case Keeping(allowed):
                 self.keeper.allow(allowed)
             case KeepPath(request, plan):
-                if self.timer.kept.find(request, plan, touch=False) is None:
+                if not self.timer.cache.has(request, plan):
                     self.keeper.send(request, plan, pinned=True)
             case TimePlan(request, plan):
                 if answer(self.timer, self.clock, request, plan, self.send, newer):
                     self.keeper.send(request, plan, pinned=False)
                 self.send(Done(request.request_id))
             case KeeperResult(_, request, plan, trajectory, pinned):
-                self.timer.kept.add(request, plan, trajectory, pinned)
-                self.send(Kept(len(self.timer.kept)))
+                self.timer.cache.keep(request, plan, trajectory, pinned)
+                self.send(Kept(len(self.timer.cache)))
 
 
 class Keeper:
