@@ -67,9 +67,9 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from arm_control import config  # noqa: E402
 from arm_control.control.controller import ArmController  # noqa: E402
 from arm_control.control.events import parse_event  # noqa: E402
-from arm_control.control.goals import GoalValidator  # noqa: E402
-from arm_control.control.plan_caches import preset_pairs  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
+from arm_control.plans.cache import preset_pairs  # noqa: E402
+from arm_control.plans.goals import GoalValidator  # noqa: E402
 
 SETTLED_RAD = math.radians(1.0)     # within this of where the arm came to rest
 REST_FOR_S = 0.3                    # ... for this long

@@ -24,10 +24,10 @@ import numpy as np  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.controller import ArmController  # noqa: E402
-from arm_control.control.plan_port import plan_in_process  # noqa: E402
 from arm_control.control.state_machine import ArmState  # noqa: E402
 from arm_control.model.plant import ArmPlant  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
+from arm_control.plans.port import plan_in_process  # noqa: E402
 
 MOVES = (('mid -> high back', (1.1, 0.9), (-0.6, 1.5)),
          ('low back -> low front', (-1.5, 0.15), (1.6, 0.1)),

@@ -1,7 +1,7 @@
 """Where a goal from rest ends, by the hand-over time of its refinement (in one process).
 
 A goal from rest is answered with a quick trajectory, then refined from a hand-over time
-(``control/plan_answers.py``). Per move of ``bench_trajectory.SUITE``, from its nominal
+(``plans/worker.py``). Per move of ``bench_trajectory.SUITE``, from its nominal
 start along the path the planner gives: the minimum under the electrical limits, the quick
 trajectory's and the fine one's durations (the fine: what a kept trajectory gives), and the
 end of the refined answer (hand-over + the refinement's duration) for each hand-over time;
@@ -27,10 +27,10 @@ import minimum_time  # noqa: E402
 import robot_clock  # noqa: E402
 
 from arm_control import config  # noqa: E402
-from arm_control.control.goals import Goal  # noqa: E402
-from arm_control.control.plan_messages import PlanRequest  # noqa: E402
-from arm_control.control.plans import PlanTimer  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
+from arm_control.plans.goals import Goal  # noqa: E402
+from arm_control.plans.messages import PlanRequest  # noqa: E402
+from arm_control.plans.timer import PlanTimer  # noqa: E402
 
 HANDOVERS_S = (0.03, 0.045, 0.06, 0.08, 0.1, 0.12, 0.15)
 REPEATS = 3

@@ -16,8 +16,8 @@ import time
 import numpy as np
 
 from arm_control.control.controller import ArmController
-from arm_control.control.plan_port import InProcessPlanning
 from arm_control.model.plant import ArmPlant
+from arm_control.plans.port import InProcessPlanning
 
 HOLD_BEFORE_S = 0.5
 TIMEOUT_S = 8.0

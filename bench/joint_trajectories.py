@@ -25,12 +25,12 @@ from trajectory_checks import moveit_style, request  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.closed_loop import ClosedLoop  # noqa: E402
-from arm_control.control.goals import Goal  # noqa: E402
-from arm_control.control.joint_trajectory import TrajectoryRefused  # noqa: E402
 from arm_control.control.motions import Motion  # noqa: E402
 from arm_control.control.state_machine import ArmState  # noqa: E402
-from arm_control.control.trajectory_goals import FollowSettings, TrajectoryGoals  # noqa: E402
 from arm_control.parameters import read_parameter_files  # noqa: E402
+from arm_control.plans.goals import Goal  # noqa: E402
+from arm_control.plans.joint_trajectory import TrajectoryRefused  # noqa: E402
+from arm_control.plans.trajectory_goals import FollowSettings, TrajectoryGoals  # noqa: E402
 
 START = (1.5708, -1.5708)
 # (case, end configuration (rad), seconds asked, points, with velocities and accelerations)

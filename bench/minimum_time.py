@@ -26,11 +26,11 @@ import casadi
 import numpy as np
 
 from arm_control import config
-from arm_control.control.goals import GoalValidator
 from arm_control.model.dynamics import ArmDynamics, COULOMB_SMOOTHING_RAD_S
 from arm_control.model.electrical import PowerSupply
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.planner import Planner
+from arm_control.plans.goals import GoalValidator
 from arm_control.timing import time_optimal_trajectory, TrajectoryLimits
 
 KNOTS = (25, 50, 100)

@@ -36,10 +36,10 @@ from bench_ros import breakdown_ms, nodes, RosMoves, wait_for_presets_kept  # no
 import numpy as np  # noqa: E402
 
 from arm_control import config  # noqa: E402
-from arm_control.control.goals import GoalValidator  # noqa: E402
 from arm_control.model.kinematics import UnreachableError  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
 from arm_control.parameters import default_parameter_file  # noqa: E402
+from arm_control.plans.goals import GoalValidator  # noqa: E402
 
 
 def euler_circuit(names) -> list:

@@ -42,14 +42,14 @@ import busy  # noqa: E402
 import numpy as np  # noqa: E402
 
 from arm_control import config  # noqa: E402
-from arm_control.control.goals import Goal  # noqa: E402
-from arm_control.control.plan_answers import HandoverClock  # noqa: E402
-from arm_control.control.plan_caches import PresetAnswers  # noqa: E402
-from arm_control.control.plan_messages import PlanRequest  # noqa: E402
-from arm_control.control.plans import PlanTimer  # noqa: E402
 from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
+from arm_control.plans.cache import PresetAnswers  # noqa: E402
+from arm_control.plans.goals import Goal  # noqa: E402
+from arm_control.plans.messages import PlanRequest  # noqa: E402
+from arm_control.plans.timer import PlanTimer  # noqa: E402
+from arm_control.plans.worker import HandoverClock  # noqa: E402
 from arm_control.realtime import raised  # noqa: E402
 
 PLANNING_REPEATS = 10

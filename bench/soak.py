@@ -46,9 +46,9 @@ from std_srvs.srv import Trigger  # noqa: E402
 
 from arm_control import config  # noqa: E402
 from arm_control.control.events import EventKind, parse_event  # noqa: E402
-from arm_control.control.goals import GoalValidator  # noqa: E402
 from arm_control.model.kinematics import TwoLinkKinematics  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
+from arm_control.plans.goals import GoalValidator  # noqa: E402
 
 ARM, CONTROLLER = config.load('controller')
 _, SIM = config.load('sim')

@@ -34,9 +34,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from arm_control import config  # noqa: E402
 from arm_control.control.closed_loop import ClosedLoop  # noqa: E402
-from arm_control.control.goals import GoalValidator  # noqa: E402
 from arm_control.model.world import ForbiddenSpace  # noqa: E402
 from arm_control.planning.planner import Planner  # noqa: E402
+from arm_control.plans.goals import GoalValidator  # noqa: E402
 
 # (name, start point, its elbow branch (index of free_configurations), goal point), in m.
 MOVES = [('back -> low front, full extension', (-1.0, 1.0), 1, (1.6, 0.12)),

@@ -2,8 +2,9 @@
 
 Each room is a folder of ``arm_control/`` (or a module at its top), on the floor its layer
 gives it: the parameter files, the arm description and the logs at the bottom, the model
-with the world, timing, planning, identification and the FRC side on it, control (which
-follows timed motions) and what people see above them, and the node shells on top. An
+with the world, timing, planning, identification and the FRC side on it, plans (a goal's
+path checked and timed, for whoever needs a trajectory) above them, control (which follows
+timed motions) and what people see above that, and the node shells on top. An
 arrow is the imports from one room to another (their count); one that runs up a floor, or
 sideways between two node shells, is drawn red and listed under the picture.
 
@@ -23,8 +24,8 @@ from matplotlib import patches, pyplot  # noqa: E402
 
 # Floor of each room (higher imports lower), and what it holds, for the picture.
 LAYERS = {'parameters': 0, 'text': 0, 'realtime': 0, 'config': 1, 'logs': 1, 'model': 2,
-          'timing': 3, 'planning': 3, 'sysid': 3, 'frc': 3, 'control': 4, 'visual': 4,
-          'bringup': 5, 'nodes': 5}
+          'timing': 3, 'planning': 3, 'sysid': 3, 'frc': 3, 'plans': 4, 'control': 5,
+          'visual': 5, 'bringup': 6, 'nodes': 6}
 # Modules of nodes/ that are executables (setup.py's console scripts): a shell importing
 # another shell is sideways.
 SHELLS = {'sim', 'controller_start', 'planner', 'tour', 'viewer', 'markers', 'recorder',

@@ -12,16 +12,16 @@ import numpy as np
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind
-from arm_control.control.plan_port import plan_in_process
 from arm_control.control.state_machine import ArmState
 from arm_control.model.plant import ArmPlant
 from arm_control.model.world import ForbiddenSpace
+from arm_control.plans.port import plan_in_process
 
 
 class ClosedLoop:
     """The plant and the core, stepped together at the control rate.
 
-    ``planner``: the core plans with it in-process (``plan_port.InProcessPlanning``: anything
+    ``planner``: the core plans with it in-process (``plans.port.InProcessPlanning``: anything
     with ``plan(start_q, goal_xy)``, e.g. ``planning.planner.Planner``). ``observers`` are
     called after every step with (loop, reading, voltage). ``command_delay_s``: each command
     acts this long after its tick, as through ROS; the core is told so (its step is for

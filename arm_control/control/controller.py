@@ -19,7 +19,7 @@ Each period the node (or a test, or a benchmark) calls ``step(now_s, reading)``;
 ``take_news`` gives the publisher what changed. Callers read those, not the core's parts.
 
 The core does not plan: starting a goal emits a ``PlanRequest`` and the answer comes back as
-a ``TimedPlan`` through ``on_timed_plan``, from one ``plan_port.Planning`` -- in-process
+a ``TimedPlan`` through ``on_timed_plan``, from one ``plans.port.Planning`` -- in-process
 (tests, benchmarks) or ``PlanLink`` (the node). A ``planning`` set on the core is handed
 the requests in the step that asks them; without one the caller takes them
 (``take_news``). No plan within ``planner_timeout_s``: the goal fails with the reason --
@@ -37,8 +37,6 @@ from arm_control.control.driver import DriverMode
 from arm_control.control.events import EventKind as Kind, EventLog
 from arm_control.control.goal_runner import GoalRunner
 from arm_control.control.motions import Motion, Setpoints
-from arm_control.control.plan_messages import PlanRequest, TimedPlan
-from arm_control.control.plans import PlanTimer
 from arm_control.control.port import News, Step
 from arm_control.control.recovery import Recovery
 from arm_control.control.safety import SafetyRules, sure_limits
@@ -47,6 +45,8 @@ from arm_control.control.state_machine import ArmState as S, StateMachine, STOPP
 from arm_control.control.stops import Stops
 from arm_control.control.tracking import Tracking
 from arm_control.model.kinematics import TwoLinkKinematics
+from arm_control.plans.messages import PlanRequest, TimedPlan
+from arm_control.plans.timer import PlanTimer
 from arm_control.text import quote
 
 
@@ -56,7 +56,7 @@ class ArmController:
 
     def __init__(self, arm: ArmConfig, config: ControllerConfig, planning=None):
         self.arm, self.config = arm, config
-        self.planning = planning      # a ``plan_port.Planning``, or None: ``take_news``
+        self.planning = planning      # a ``plans.port.Planning``, or None: ``take_news``
         self.period_s = config.period_s
         self.plan_timer = PlanTimer(arm, config)
         dynamics, self.forbidden = self.plan_timer.dynamics, self.plan_timer.forbidden

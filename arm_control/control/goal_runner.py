@@ -17,11 +17,12 @@ import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.events import EventKind as Kind, EventLog
-from arm_control.control.goals import Goal, GoalQueue, GoalValidator
+from arm_control.control.goal_queue import GoalQueue
 from arm_control.control.motions import Motion, Setpoints, StoppingMotion, StraightStop
-from arm_control.control.plan_messages import PlanRequest, TimedPlan
-from arm_control.control.plans import PlanHandoff, Verdict
+from arm_control.control.plan_handoff import PlanHandoff, Verdict
 from arm_control.control.state_machine import ArmState as S, StateMachine, Trigger as T
+from arm_control.plans.goals import Goal, GoalValidator
+from arm_control.plans.messages import PlanRequest, TimedPlan
 from arm_control.text import quote
 
 # A preempting goal's new trajectory starts this far ahead on the current one: the time

@@ -16,12 +16,12 @@ import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.gain_limits import check_gains
-from arm_control.control.goals import GoalValidator
-from arm_control.control.plan_caches import preset_pairs
-from arm_control.control.plans import PlanTimer
 from arm_control.control.safety import sure_limits
 from arm_control.model.kinematics import UnreachableError
 from arm_control.parameters import ParameterError
+from arm_control.plans.cache import preset_pairs
+from arm_control.plans.goals import GoalValidator
+from arm_control.plans.timer import PlanTimer
 
 # The controller's settings that may change while it runs (a name, or a prefix ending in
 # '.'): gains, integrator limit, reserves, tolerances, dwell and presets.

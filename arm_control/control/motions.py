@@ -21,20 +21,6 @@ class HoldTrajectory:
         return self.q.copy(), np.zeros(2), np.zeros(2)
 
 
-class ChainedTrajectory:
-    """Trajectories one after another, each starting where and when the last one ends."""
-
-    def __init__(self, parts):
-        self.parts = list(parts)
-        self.offsets_s = np.concatenate([[0.0], np.cumsum([p.duration_s for p in self.parts])])
-        self.duration_s = float(self.offsets_s[-1])
-
-    def sample(self, t_s):
-        index = int(np.clip(np.searchsorted(self.offsets_s, t_s, side='right') - 1,
-                            0, len(self.parts) - 1))
-        return self.parts[index].sample(t_s - self.offsets_s[index])
-
-
 class Motion:
     """A trajectory pinned to the clock: it takes over at ``begin_s`` and is at rest from
     ``end_s`` on, at ``final_q``."""

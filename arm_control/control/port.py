@@ -11,9 +11,9 @@ from typing import Optional
 import numpy as np
 
 from arm_control.control.events import Event
-from arm_control.control.goals import Goal
-from arm_control.control.plan_messages import PlanRequest
 from arm_control.control.state_machine import ArmState
+from arm_control.plans.goals import Goal
+from arm_control.plans.messages import PlanRequest
 
 
 @dataclass(frozen=True, eq=False)

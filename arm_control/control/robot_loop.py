@@ -21,10 +21,10 @@ import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
 from arm_control.control.controller import ArmController
-from arm_control.control.plan_port import plan_in_process
 from arm_control.control.robot_command import Commander
 from arm_control.model.plant import ArmPlant
 from arm_control.model.profile import Profile, ProfilePlayer
+from arm_control.plans.port import plan_in_process
 
 MODES = ('volts', 'volts_at_instant', 'profile')
 STEP_MS = 1

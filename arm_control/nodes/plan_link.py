@@ -16,14 +16,14 @@ import time
 
 from nav_msgs.srv import GetPlan
 
-from arm_control.control.goals import Goal, GoalValidator
-from arm_control.control.plan_caches import preset_pairs
-from arm_control.control.plan_messages import PathPlan, PlanRequest, TimedPlan
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes import messages
 from arm_control.nodes.plan_worker import PlanWorker
 from arm_control.planning.poses import waypoints_from_poses
+from arm_control.plans.cache import preset_pairs
+from arm_control.plans.goals import Goal, GoalValidator
+from arm_control.plans.messages import PathPlan, PlanRequest, TimedPlan
 
 # A call unanswered this long is sent again, at most RESENDS times; the earlier calls stay
 # open and the first answer counts. An answer can be lost: a planner we have just found may
@@ -41,7 +41,7 @@ PRESET_CALLS = 3
 
 
 class PlanLink:
-    """One node's planner client and timing worker (the node's ``plan_port.Planning``:
+    """One node's planner client and timing worker (the node's ``plans.port.Planning``:
     ``send``, answers to ``on_timed``); made first thing at the node's start, so that
     finding the planner and starting the worker go on while the rest is built."""
 

@@ -9,7 +9,7 @@ the node's whole module again, rclpy and all, and a fork would copy the DDS thre
 It runs at normal priority, and dies with the node: its stdin closes when the node's
 process goes.
 
-A plan from rest is answered twice, quick then refined (``control/plan_answers.py``). The
+A plan from rest is answered twice, quick then refined (``plans/worker.py``). The
 worker says it is ready once its timing kernels are loaded (before its settings come: the
 ``controller`` executable starts it first, ``controller_start``); then, only while no
 request waits, it warms up in slices (``WarmUp``), so that later goals find the caches warm
@@ -34,43 +34,36 @@ import subprocess
 import sys
 import threading
 
-from arm_control.control.plan_answers import answer, HandoverClock, WarmUp
-from arm_control.control.plan_messages import (Done, KeeperJob, KeeperResult, KeeperSettings,
-                                               Keeping, KeepPath, Kept, PathPlan, PlanRequest,
-                                               Ready, Settings, TimedPlan, TimePlan)
-from arm_control.control.plans import PlanTimer
 from arm_control.nodes.worker_spawn import spawn, take_started
+from arm_control.plans.messages import (Done, KeeperJob, KeeperResult, KeeperSettings,
+                                        Keeping, KeepPath, Kept, PathPlan, PlanRequest,
+                                        Ready, Settings, TimedPlan, TimePlan)
+from arm_control.plans.worker import Keeper, KEEPER_QUEUE, Worker
 from arm_control.realtime import lower_this_thread, raise_this_thread
 from arm_control.timing.bus import compile_kernels
 
 
 # The keeper's niceness: below the worker, the planner and everything else at normal
-# priority, so it takes only the CPU the others leave; at most this many paths wait for it,
-# the latest first.
+# priority, so it takes only the CPU the others leave.
 KEEPER_NICE = 10
-KEEPER_QUEUE = 256
 
 
 def _serve(requests: Connection, results: Connection) -> None:
-    """The worker (``plan_messages``): times each plan with the latest ``Settings``, the
-    answers from rest in two (the quick one, then its refinement), then says the request
-    ``Done``; hands the keeper the paths worth keeping and keeps what it times. It waits for
-    the next item at ``planning_priority`` and keeps it for a goal's quick timing and its
-    refinement only (``answer``): at normal priority, beside busy processes, a goal's request
-    waited in the run queue before it was even read; the rest (settings, keeping, warm-up)
-    runs at normal."""
+    """The worker (``plans.worker.Worker``) between its pipes: it waits for the next item at
+    ``planning_priority`` and keeps it for a goal's quick timing and its refinement only
+    (``answer``): at normal priority, beside busy processes, a goal's request waited in the
+    run queue before it was even read; the rest (settings, keeping, warm-up) runs at normal.
+    The warm-up goes a slice at a time, only while nothing waits."""
     compile_kernels()               # loaded from numba's cache (or compiled) while it waits
-    timer = warm_up = None
-    clock = HandoverClock()
     incoming = _Incoming(requests)
     keeping = _Keeping()
-    priority = 0                    # the latest settings' planning_priority
+    worker = Worker(results.send, keeping)
     try:
         while True:
-            if warm_up is not None and not incoming.waiting and not requests.poll():
-                warm_up = warm_up if warm_up.step(timer, clock) else None
+            if worker.warming and not incoming.waiting and not requests.poll():
+                worker.warm()
                 continue
-            listening = priority > 0 and raise_this_thread(priority) is None
+            listening = worker.priority > 0 and raise_this_thread(worker.priority) is None
             keeper = keeping.keeper
             if not incoming.waiting and keeper is not None \
                     and requests not in wait([requests, keeper.results]):
@@ -78,33 +71,14 @@ def _serve(requests: Connection, results: Connection) -> None:
                     lower_this_thread()
                 done = keeping.take()
                 if done is not None:
-                    timer.kept.add(done.request, done.plan, done.trajectory, done.pinned)
-                    results.send(Kept(len(timer.kept)))
+                    worker.take(done)
                 continue
             item = incoming.next()
             if listening and not isinstance(item, TimePlan):    # answer() lowers after
                 lower_this_thread()
-            match item:
-                case None:
-                    return
-                case Settings(arm, config) as settings:
-                    first = timer is None
-                    timer = PlanTimer(arm, config)
-                    priority = config.planning_priority
-                    keeping.retune(settings)
-                    results.send(Kept(0))
-                    if first:
-                        results.send(Ready())
-                        warm_up = WarmUp()
-                case Keeping(allowed):
-                    keeping.allow(allowed)
-                case KeepPath(request, plan):
-                    if timer.kept.find(request, plan, touch=False) is None:
-                        keeping.send(request, plan, pinned=True)
-                case TimePlan(request, plan):
-                    if answer(timer, clock, request, plan, results.send, incoming.newer):
-                        keeping.send(request, plan, pinned=False)
-                    results.send(Done(request.request_id))
+            if item is None:
+                return
+            worker.take(item, incoming.newer)
     except (EOFError, OSError):     # the node is gone
         return
     finally:
@@ -245,33 +219,22 @@ class _Keeper:
 
 
 def _keep(requests: Connection, results: Connection) -> None:
-    """The keeper: times each ``KeeperJob`` finely from rest, the latest first, with the
-    latest ``KeeperSettings``, and sends back a ``KeeperResult`` for each it could time."""
-    timer, generation, waiting = None, 0, []
+    """The keeper (``plans.worker.Keeper``) between its pipes: the latest job first, each
+    ``KeeperResult`` sent back."""
+    keeper = Keeper()
     while True:
         try:
-            while not waiting or requests.poll():
-                match requests.recv():
-                    case None:
-                        return
-                    case KeeperSettings(new, settings):
-                        generation, waiting = new, []
-                        timer = PlanTimer(settings.arm, settings.config)
-                    case KeeperJob() as job:
-                        waiting = (waiting + [job])[-KEEPER_QUEUE:]
+            while not keeper.waiting or requests.poll():
+                item = requests.recv()
+                if item is None:
+                    return
+                keeper.take(item)
         except (EOFError, OSError):
             return
-        job = waiting.pop()
-        if job.generation != generation:
-            continue
-        try:
-            trajectory = timer.fine_from_rest(job.request, job.plan)
-        except Exception:                   # that path is timed afresh each time
-            trajectory = None
-        if trajectory is not None:
+        result = keeper.work()
+        if result is not None:
             try:
-                results.send(KeeperResult(generation, job.request, job.plan, trajectory,
-                                          job.pinned))
+                results.send(result)
             except OSError:                 # the worker is gone
                 return
 

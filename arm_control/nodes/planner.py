@@ -38,13 +38,13 @@ from rclpy.node import Node
 
 from arm_control import realtime
 from arm_control.config import ArmConfig, FRAME_ID, PlannerConfig
-from arm_control.control.goals import PLANE_TOLERANCE_M
-from arm_control.control.plan_caches import PresetAnswers
-from arm_control.control.plans import BranchRanking
 from arm_control.nodes import messages
 from arm_control.nodes.common import declare_parameters, LATCHED, run, status
 from arm_control.planning.planner import Planner
 from arm_control.planning.poses import poses_from_waypoints
+from arm_control.plans.cache import PresetAnswers
+from arm_control.plans.goals import PLANE_TOLERANCE_M
+from arm_control.plans.timer import BranchRanking
 from arm_control.text import quote
 from arm_control.timing.bus import compile_kernels
 

@@ -4,7 +4,7 @@ what MoveIt sends every plan through) and the ``~/joint_trajectory`` topic
 (trajectory_msgs/JointTrajectory, fire and forget; an empty one stops and holds, as
 ``~/cancel``).
 
-A shell: the checks are ``control.trajectory_goals``, and a checked trajectory becomes the
+A shell: the checks are ``plans.trajectory_goals``, and a checked trajectory becomes the
 core's current goal (``GoalRunner.follow``), followed by the control loop like a planned
 one. A monitor timer (JTC's action_monitor_rate) sends feedback and ends the goal. Where
 JTC refuses a goal outright (in ROS 2 that carries no result), this server accepts it and
@@ -23,14 +23,14 @@ from rclpy.task import Future
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from arm_control.config import JOINT_NAMES
-from arm_control.control.goals import Goal
-from arm_control.control.joint_trajectory import (ErrorCode, JointTolerance, TrajectoryPoint,
-                                                  TrajectoryRefused, TrajectoryRequest)
 from arm_control.control.motions import Motion
 from arm_control.control.state_machine import STOPPED
-from arm_control.control.trajectory_goals import FollowSettings, TrajectoryGoals, TrajectoryWatch
 from arm_control.nodes import messages
 from arm_control.nodes.common import COMMANDS, guarded, NodePart
+from arm_control.plans.goals import Goal
+from arm_control.plans.joint_trajectory import (ErrorCode, JointTolerance, TrajectoryPoint,
+                                                TrajectoryRefused, TrajectoryRequest)
+from arm_control.plans.trajectory_goals import FollowSettings, TrajectoryGoals, TrajectoryWatch
 from arm_control.timing.bus import compile_kernels
 
 try:

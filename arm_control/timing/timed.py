@@ -110,3 +110,17 @@ class Trajectory:
         pieces = [Piece.from_profile(p.path, p.grid, p.speed ** 2, factor)
                   for p in self._pieces]
         return Trajectory(pieces, self.start_rad, self.end_rad)
+
+
+class ChainedTrajectory:
+    """Trajectories one after another, each starting where and when the last one ends."""
+
+    def __init__(self, parts):
+        self.parts = list(parts)
+        self.offsets_s = np.concatenate([[0.0], np.cumsum([p.duration_s for p in self.parts])])
+        self.duration_s = float(self.offsets_s[-1])
+
+    def sample(self, t_s):
+        index = int(np.clip(np.searchsorted(self.offsets_s, t_s, side='right') - 1,
+                            0, len(self.parts) - 1))
+        return self.parts[index].sample(t_s - self.offsets_s[index])

@@ -60,6 +60,19 @@ def test_rclpy_stays_in_the_node_shells():
     assert users and all(draw_layers.room_of(module) == 'nodes' for module in users), users
 
 
+PROCESS_MODULES = {'multiprocessing', 'subprocess', 'signal'}
+
+
+def test_plans_are_pure_of_processes():
+    """What times and plans (``plans/``) is called the same in-process and in the worker:
+    pipes, child processes and signals are the worker shell's (``nodes/plan_worker.py``)."""
+    users = sorted(module for module, path in SOURCES.items()
+                   if draw_layers.room_of(module) == 'plans'
+                   and {name.split('.')[0] for name in imports(path)} & PROCESS_MODULES)
+    assert any(draw_layers.room_of(module) == 'plans' for module in SOURCES) and not users, \
+        users
+
+
 def test_no_module_reaches_back_to_one_that_imports_it():
     graph = {module: {name for name in imports(path) if name in SOURCES} - {module}
              for module, path in SOURCES.items()}

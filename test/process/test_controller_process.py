@@ -21,12 +21,12 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
 from arm_control import config, parameters, realtime
-from arm_control.control.goals import GoalValidator
-from arm_control.control.plan_caches import preset_pairs
 from arm_control.model.profile import Profile
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes import messages
 from arm_control.nodes.common import COMMANDS, controller_sees_planner, LATCHED
+from arm_control.plans.cache import preset_pairs
+from arm_control.plans.goals import GoalValidator
 
 SETTLE_TIMEOUT_S = 40.0
 

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
-from arm_control.control.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.plant import ArmPlant
+from arm_control.plans.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 
 
 STEP_RAD = 0.001745

@@ -16,15 +16,15 @@ import pytest
 from arm_control import config
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
-from arm_control.control.goals import StraightLinePlanner
-from arm_control.control.plan_messages import PlanRequest
-from arm_control.control.plan_port import InProcessPlanning
 from arm_control.control.state_machine import ArmState
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.plant import ArmPlant
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.planner import Planner
+from arm_control.plans.goals import StraightLinePlanner
+from arm_control.plans.messages import PlanRequest
+from arm_control.plans.port import InProcessPlanning
 from arm_control.timing import time_optimal_trajectory, TrajectoryLimits
 
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from arm_control.config import Rectangle
-from arm_control.control.goals import (choose_branch, clamp_to_annulus, GoalValidator,
-                                       joint_travel_rad, StraightLinePlanner)
 from arm_control.model.kinematics import TwoLinkKinematics, UnreachableError
+from arm_control.plans.goals import (choose_branch, clamp_to_annulus, GoalValidator,
+                                     joint_travel_rad, StraightLinePlanner)
 
 
 @pytest.fixture(scope='module')

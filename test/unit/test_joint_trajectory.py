@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 from trajectory_checks import moveit_style, request
 
-from arm_control.control.joint_trajectory import (ErrorCode, in_arm_order, JointTolerance,
-                                                  SplineTrajectory, start_delay_s,
-                                                  TrajectoryRefused)
 from arm_control.control.motions import Motion
-from arm_control.control.trajectory_goals import (FollowSettings, Tolerances, TrajectoryGoals,
-                                                  TrajectoryWatch)
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.parameters import ParameterError, read_parameter_files
+from arm_control.plans.joint_trajectory import (ErrorCode, in_arm_order, JointTolerance,
+                                                SplineTrajectory, start_delay_s,
+                                                TrajectoryRefused)
+from arm_control.plans.trajectory_goals import (FollowSettings, Tolerances, TrajectoryGoals,
+                                                TrajectoryWatch)
 from arm_control.timing import TrajectoryLimits
 from arm_control.timing.timing import check
 

@@ -8,10 +8,10 @@ from dataclasses import replace
 import numpy as np
 
 from arm_control import config
-from arm_control.control import plan_answers
-from arm_control.control.goals import Goal
-from arm_control.control.plan_messages import PathPlan, PlanRequest
-from arm_control.control.plans import PlanTimer
+from arm_control.plans import worker as plan_answers
+from arm_control.plans.goals import Goal
+from arm_control.plans.messages import PathPlan, PlanRequest
+from arm_control.plans.timer import PlanTimer
 
 PRIORITY = 7
 

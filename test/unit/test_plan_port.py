@@ -4,8 +4,8 @@ plans; in-process, the answer is taken in the step that asks, at that step's ins
 import pytest
 
 from arm_control.control.closed_loop import ClosedLoop
-from arm_control.control.goals import StraightLinePlanner
 from arm_control.control.state_machine import ArmState
+from arm_control.plans.goals import StraightLinePlanner
 
 GOAL_XY = (1.1, 0.9)
 

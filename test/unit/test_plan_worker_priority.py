@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from arm_control import config
-from arm_control.control.goals import Goal
-from arm_control.control.plan_messages import PathPlan, PlanRequest
 from arm_control.nodes.plan_worker import PlanWorker
+from arm_control.plans.goals import Goal
+from arm_control.plans.messages import PathPlan, PlanRequest
 from arm_control.realtime import raised
 
 

@@ -8,11 +8,11 @@ from planning_checks import assert_free_path, CHECK_STEP_RAD, highest_point_m, p
 import pytest
 
 from arm_control.config import PlannerConfig, Rectangle
-from arm_control.control.plan_caches import PresetAnswers
-from arm_control.control.plans import BranchRanking
 from arm_control.planning.plan import NoPlan
 from arm_control.planning.planner import Planner
 from arm_control.planning.poses import poses_from_waypoints
+from arm_control.plans.cache import PresetAnswers
+from arm_control.plans.timer import BranchRanking
 
 
 def test_grid_cells_lie_inside_the_joint_travel(frc):

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from arm_control import config
-from arm_control.control.goals import GoalValidator
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.graph import ConfigurationGrid, DIRECTIONS
 from arm_control.planning.planner import Planner
 from arm_control.planning.trees import GoalTrees
+from arm_control.plans.goals import GoalValidator
 
 FRC_FILE = Path(__file__).resolve().parents[2] / 'config' / 'frc_robot.yaml'
 CHECK_STEP_RAD = math.radians(0.1)

@@ -18,15 +18,17 @@ import pytest
 
 from arm_control import config
 from arm_control.control.closed_loop import ClosedLoop
-from arm_control.control.goals import Goal
-from arm_control.control.plan_caches import KeptTrajectories, preset_pairs
-from arm_control.control.plan_messages import Keeping, KeepPath, PathPlan, PlanRequest, TimePlan
-from arm_control.control.plans import BranchRanking, PlanTimer
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.kinematics import TwoLinkKinematics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.nodes.plan_worker import _Incoming, PlanWorker
 from arm_control.planning.poses import poses_from_waypoints, waypoints_from_poses
+from arm_control.plans.cache import KeptTrajectories, preset_pairs, Serves
+from arm_control.plans.goals import Goal
+from arm_control.plans.messages import (Done, KeeperResult, Keeping, KeepPath, Kept, PathPlan,
+                                        PlanRequest, Ready, Settings, TimedPlan, TimePlan)
+from arm_control.plans.timer import BranchRanking, PlanTimer
+from arm_control.plans.worker import Worker
 from arm_control.timing import (bus, exact, refined_trajectory, time_optimal_trajectory,
                                 TrajectoryLimits)
 from arm_control.timing.bus import compile_kernels, exact_timing
@@ -271,7 +273,7 @@ def test_a_goal_that_comes_again_along_the_same_path_takes_the_kept_fine_traject
     request = PlanRequest(1, goal, start, (0.0, 0.0), None, 0.0)
     quick = timer.time_plan(request, plan, quick=True)
     assert not quick.kept
-    timer.kept.add(request, plan, timer.fine_from_rest(request, plan))
+    timer.cache.keep(request, plan, timer.fine_from_rest(request, plan))
     again = timer.time_plan(PlanRequest(2, goal, start, (0.0, 0.0), None, 5.0), plan, quick=True)
     assert again.kept and again.trajectory.duration_s < quick.trajectory.duration_s
     assert_sound(again.trajectory, start, plan.waypoints_rad[-1], timer.dynamics,
@@ -281,6 +283,60 @@ def test_a_goal_that_comes_again_along_the_same_path_takes_the_kept_fine_traject
     elsewhere = timer.time_plan(PlanRequest(3, goal, moved, (0.0, 0.0), None, 6.0), other,
                                 quick=True)
     assert elsewhere.ok and not elsewhere.kept
+
+
+def test_the_cache_says_which_mechanism_serves_a_request(arm, planner):
+    """From rest along a path not kept: quick then refined; once kept: the kept one; a moving
+    start, or no path: timed at once."""
+    timer = PlanTimer(arm, config.load('controller')[1])
+    goal = timer.ranking.validator.check(-1.0, 1.0, 0.0, '', 'back').goal
+    start = (1.5708, -1.5708)
+    plan = timer.ranking.plan(planner, start, goal.xy)
+    request = PlanRequest(1, goal, start, (0.0, 0.0), None, 0.0)
+    assert timer.cache.serves(request, plan) is Serves.QUICK_THEN_FINE
+    moving = PlanRequest(2, goal, start, (0.5, 0.0), 1.0, 0.0)
+    assert timer.cache.serves(moving, plan) is Serves.AT_ONCE
+    assert timer.cache.serves(request, PathPlan(np.zeros((0, 2)), 'no path')) is Serves.AT_ONCE
+    timer.cache.keep(request, plan, timer.fine_from_rest(request, plan))
+    assert timer.cache.serves(request, plan) is Serves.KEPT and len(timer.cache) == 1
+
+
+def test_the_worker_answers_typed_messages_without_a_process(arm, planner):
+    """``Worker``: settings give ``Kept(0)`` and ``Ready``; a goal from rest a quick
+    ``TimedPlan`` (then its refinement), ``Done``, and its path for the keeper; the keeper's
+    result is kept (``Kept(1)``), and the same goal is then answered once, kept, and done."""
+    sent, keeper = [], []
+
+    class FakeKeeper:
+        def retune(self, settings):
+            pass
+
+        def allow(self, working):
+            pass
+
+        def send(self, request, plan, pinned):
+            keeper.append((request, plan, pinned))
+
+    worker = Worker(sent.append, FakeKeeper())
+    worker.take(Settings(arm, config.load('controller')[1]))
+    assert sent == [Kept(0), Ready()] and worker.warming
+    goal = worker.timer.ranking.validator.check(-1.0, 1.0, 0.0, '', 'back').goal
+    start = (1.5708, -1.5708)
+    plan = PathPlan(worker.timer.ranking.plan(planner, start, goal.xy).waypoints_rad)
+    request = PlanRequest(1, goal, start, (0.0, 0.0), None, 0.0)
+    sent.clear()
+    worker.take(TimePlan(request, plan))
+    answers = [m for m in sent if isinstance(m, TimedPlan)]
+    assert answers[0].ok and not answers[0].kept and sent[-1] == Done(1)
+    assert all(not math.isnan(m.handover_s) for m in answers[1:])
+    assert keeper == [(request, plan, False)]
+    sent.clear()
+    worker.take(KeeperResult(0, request, plan, worker.timer.fine_from_rest(request, plan),
+                             False))
+    assert sent == [Kept(1)]
+    sent.clear()
+    worker.take(TimePlan(PlanRequest(2, goal, start, (0.0, 0.0), None, 1.0), plan))
+    assert len(sent) == 2 and sent[0].kept and sent[1] == Done(2) and len(keeper) == 1
 
 
 def test_a_goal_between_presets_finds_the_path_kept_for_it_after_the_round_trip(arm, planner):
@@ -306,8 +362,8 @@ def test_a_goal_between_presets_finds_the_path_kept_for_it_after_the_round_trip(
     for start_q, goal_xy in preset_pairs(timer.ranking.validator):
         if goal_xy == presets['back_score']:
             plan = through_poses(start_q, 'back_score')
-            timer.kept.add(request(start_q, 'back_score'), plan,
-                           timer.fine_from_rest(request(start_q, 'back_score'), plan), True)
+            timer.cache.keep(request(start_q, 'back_score'), plan,
+                             timer.fine_from_rest(request(start_q, 'back_score'), plan), True)
             kept_starts.append(np.asarray(start_q, float))
     mid = timer.ranking.validator.free_configurations(*presets['mid_score'])[0]
     to_stow = timer.time_plan(request(mid, 'stow'), through_poses(mid, 'stow'), quick=True)

@@ -17,13 +17,13 @@ import numpy as np
 from arm_control import config
 from arm_control.control.controller import ArmController
 from arm_control.control.events import EventKind as Kind
-from arm_control.control.goals import GoalValidator
-from arm_control.control.plan_port import plan_in_process
 from arm_control.control.sensing import SensorReading
 from arm_control.control.state_machine import ArmState
 from arm_control.model.plant import ArmPlant
 from arm_control.model.world import ForbiddenSpace
 from arm_control.planning.planner import Planner
+from arm_control.plans.goals import GoalValidator
+from arm_control.plans.port import plan_in_process
 
 
 def test_commanding_ends_within_the_joint_state_timeout(arm, controller_config):

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from trajectory_checks import moveit_style, request
 
-from arm_control.control.goals import Goal
 from arm_control.control.motions import Motion
 from arm_control.control.state_machine import ArmState
-from arm_control.control.trajectory_goals import FollowSettings, TrajectoryGoals
 from arm_control.parameters import read_parameter_files
+from arm_control.plans.goals import Goal
+from arm_control.plans.trajectory_goals import FollowSettings, TrajectoryGoals
 
 DEG = math.pi / 180.0
 

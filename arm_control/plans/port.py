@@ -15,7 +15,7 @@ A core given a ``Planning`` hands it its requests in the step that asks them; wi
 
 from typing import Callable, Optional, Protocol, Sequence
 
-from arm_control.control.plan_messages import PlanRequest, TimedPlan
+from arm_control.plans.messages import PlanRequest, TimedPlan
 
 
 class Planning(Protocol):

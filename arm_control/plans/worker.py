@@ -5,6 +5,10 @@ its refinement from a hand-over time a safe margin past when the refinement is e
 be ready (``HandoverClock``) -- unless a newer request is already waiting -- and, when it
 took so long that it surely came too late, once more from later on. ``send`` and ``newer``
 are the worker's: pure of processes, so tests and benches call them directly.
+
+``Worker`` and ``Keeper`` are the worker's and its keeper's logic: a typed message in
+(``messages``), typed messages out, no pipes and no processes (``nodes/plan_worker.py``
+carries them between processes).
 """
 
 import threading
@@ -12,9 +16,12 @@ import time
 
 import numpy as np
 
-from arm_control.control.goals import Goal
-from arm_control.control.plan_messages import PathPlan, PlanRequest, TimedPlan
-from arm_control.control.plans import PlanTimer
+from arm_control.plans.cache import Serves
+from arm_control.plans.goals import Goal
+from arm_control.plans.messages import (Done, KeeperJob, KeeperResult, KeeperSettings,
+                                        Keeping, KeepPath, Kept, PathPlan, PlanRequest,
+                                        Ready, Settings, TimedPlan, TimePlan)
+from arm_control.plans.timer import PlanTimer
 from arm_control.realtime import raised
 from arm_control.timing.moving_start import toppra_solver
 
@@ -28,6 +35,8 @@ MIN_HANDOVER_S = 0.03
 HANDOVER_SHARE = 0.4
 # A refinement that came too late is tried once more from later on, up to this share.
 RETRY_SHARE = 0.7
+# At most this many paths wait for the keeper, the latest first.
+KEEPER_QUEUE = 256
 PROVE_TILES = 64            # forbidden-space cells proved per slice of the warm-up (ms each)
 FIRST_RATIO = 12.0
 RATIO_MEMORY = 0.7
@@ -55,17 +64,17 @@ def answer(timer: PlanTimer, clock: HandoverClock, request: PlanRequest, plan, s
     """Time ``plan`` for ``request`` and ``send`` the answer; from rest, the quick one, then
     (unless ``newer()``: another request waits) its refinement. True: a path from rest worth
     timing finely and keeping."""
-    from_rest = request.start_time_s is None
+    quick = timer.cache.serves(request, plan) is Serves.QUICK_THEN_FINE
     began = time.perf_counter()
     try:
         with raised(timer.config.planning_priority):     # the arm waits for this one
-            timed = timer.time_plan(request, plan, quick=from_rest)
+            timed = timer.time_plan(request, plan, quick=quick)
     except Exception as error:              # never leave a goal hanging
         timed = TimedPlan(request, None, f'timing the plan failed: {error!r}')
     send(timed)
     sent = time.perf_counter()
     quick_s = sent - began
-    if not (from_rest and timed.ok) or timed.kept:
+    if not (quick and timed.ok):
         return False
     if newer():
         return True
@@ -134,3 +143,79 @@ def _answer_between_presets(timer: PlanTimer, clock: HandoverClock) -> None:
         request = PlanRequest(0, Goal(x1, y1, 'warm-up'), starts[0], (0.0, 0.0), None, 0.0)
         answer(timer, clock, request, PathPlan(np.array([starts[0], goals[0]])),
                lambda timed: None, lambda: False)
+
+
+class Worker:
+    """The plan worker: ``take`` each message from the node (or the keeper's
+    ``KeeperResult``) and answer through ``send`` -- ``TimedPlan``s, then ``Done`` per
+    request, ``Kept`` counts, ``Ready`` once its first settings came. ``keeper`` (``send``,
+    ``retune``, ``allow``) is handed the paths worth timing finely; ``newer()`` says whether
+    another request waits (a refinement is then not worth making)."""
+
+    def __init__(self, send, keeper):
+        self.send, self.keeper = send, keeper
+        self.timer = self.warm_up = None
+        self.clock = HandoverClock()
+        self.priority = 0               # the latest settings' planning_priority
+
+    @property
+    def warming(self) -> bool:
+        return self.warm_up is not None
+
+    def warm(self) -> None:
+        """One slice of the warm-up (call only while no request waits)."""
+        if not self.warm_up.step(self.timer, self.clock):
+            self.warm_up = None
+
+    def take(self, item, newer=lambda: False) -> None:
+        match item:
+            case Settings(arm, config) as settings:
+                first = self.timer is None
+                self.timer = PlanTimer(arm, config)
+                self.priority = config.planning_priority
+                self.keeper.retune(settings)
+                self.send(Kept(0))
+                if first:
+                    self.send(Ready())
+                    self.warm_up = WarmUp()
+            case Keeping(allowed):
+                self.keeper.allow(allowed)
+            case KeepPath(request, plan):
+                if not self.timer.cache.has(request, plan):
+                    self.keeper.send(request, plan, pinned=True)
+            case TimePlan(request, plan):
+                if answer(self.timer, self.clock, request, plan, self.send, newer):
+                    self.keeper.send(request, plan, pinned=False)
+                self.send(Done(request.request_id))
+            case KeeperResult(_, request, plan, trajectory, pinned):
+                self.timer.cache.keep(request, plan, trajectory, pinned)
+                self.send(Kept(len(self.timer.cache)))
+
+
+class Keeper:
+    """The keeper: ``take`` its settings and jobs; ``work`` times the latest job finely from
+    rest with the latest settings (a job of older settings is dropped) and returns its
+    ``KeeperResult``, or None."""
+
+    def __init__(self):
+        self.timer, self.generation, self.waiting = None, 0, []
+
+    def take(self, item) -> None:
+        match item:
+            case KeeperSettings(generation, settings):
+                self.generation, self.waiting = generation, []
+                self.timer = PlanTimer(settings.arm, settings.config)
+            case KeeperJob() as job:
+                self.waiting = (self.waiting + [job])[-KEEPER_QUEUE:]
+
+    def work(self) -> KeeperResult | None:
+        job = self.waiting.pop()
+        if job.generation != self.generation:
+            return None
+        try:
+            trajectory = self.timer.fine_from_rest(job.request, job.plan)
+        except Exception:                   # that path is timed afresh each time
+            return None
+        if trajectory is None:
+            return None
+        return KeeperResult(self.generation, job.request, job.plan, trajectory, job.pinned)

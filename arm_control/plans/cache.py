@@ -1,32 +1,20 @@
 """Answers worked out before they are asked for: what makes a robot's repeated goals quick.
 
 A robot goes from preset to preset, again and again, so most goals have been seen before.
-Five things serve them, each where its work is done; none is ever waited for:
-
-- preset trees (``planning/trees.py``, the planner node): shortest-path trees toward each
-  preset, built one a tick while the planner idles after start; a path to a preset from
-  anywhere is then read off a tree instead of searched.
-- ``PresetAnswers`` (the planner node): the whole answer to each request between two
-  presets, worked out after the trees, one a tick while the planner idles.
-- quick then refined (the plan worker, ``PlanTimer``): a goal from rest is answered at once
-  with a quick timing the arm starts on; the fine one takes over at a hand-over time.
-- ``KeptTrajectories`` (the plan worker): the fine trajectory from rest of a path timed
-  before, answered at once with nothing to refine.
-- the keeper (a process of the worker's, at nice 10, SIGSTOPped while a goal is planned or
-  followed): times finely the paths answered from rest and, once the arm has had no goal for
-  a while, those between presets, and fills ``KeptTrajectories``.
-
-A request is one of these when its start is the stored one's to within rounding (the pose
-it travelled as) and its goal the same point: ``SAME_START_RAD``, ``SAME_GOAL_M``.
+``PlanCache`` is the one place that says which of the speed mechanisms serves a goal, and
+when each is filled; none is ever waited for. A request is one stored when its start is the
+stored one's to within rounding (the pose it travelled as) and its goal the same point:
+``SAME_START_RAD``, ``SAME_GOAL_M``.
 """
 
 from collections import OrderedDict
+from enum import Enum
 import math
 
 import numpy as np
 
-from arm_control.control.goals import GoalValidator
-from arm_control.control.plan_messages import PlanRequest
+from arm_control.plans.goals import GoalValidator
+from arm_control.plans.messages import PlanRequest
 
 # A request is one worked out ahead (``PresetAnswers``), or finds a kept trajectory
 # (``KeptTrajectories``: its path's waypoints too), when its start is within this of that
@@ -114,7 +102,7 @@ class PresetAnswers:
 
     ``pending`` lists what is left to work out (each preset branch as a start, toward every
     other preset), ``prepare_next`` works out one; ``plan`` answers any request, from the
-    store when its start and goal are one of these. ``ranking``: a ``plans.BranchRanking``."""
+    store when its start and goal are one of these. ``ranking``: a ``timer.BranchRanking``."""
 
     def __init__(self, ranking, planner):
         self.ranking, self.planner = ranking, planner
@@ -139,3 +127,66 @@ class PresetAnswers:
                     and math.dist(goal, goal_xy) <= SAME_GOAL_M):
                 return plan
         return self.ranking.plan(self.planner, start_q, goal_xy)
+
+
+class Serves(Enum):
+    """Which mechanism answers a request in the worker (``PlanCache.serves``)."""
+
+    KEPT = 'kept'                   # the fine trajectory kept from rest: at once, final
+    QUICK_THEN_FINE = 'quick'       # from rest, not kept: quick now, refined from a hand-over
+    AT_ONCE = 'at once'             # a moving start (or no path): timed finely, once
+
+
+class PlanCache:
+    """The speed mechanisms, and which serves when. This object is the plan worker's side
+    (a ``PlanTimer``'s ``cache``: ``serves``, ``trajectory``, ``keep``); the planner node
+    holds its side beside its graph: the trees in its ``Planner``, the answers between
+    presets in a ``PresetAnswers``.
+
+    ====================  ======================================  ============================
+    mechanism             serves                                  when it works (where)
+    ====================  ======================================  ============================
+    preset trees          a path to or from a preset, read off a  after start, one tree a tick
+                          shortest-path tree: no search           while idle (planner node,
+                                                                  ``Planner.prepare``)
+    ``PresetAnswers``     the branch-ranked path between two      after the trees, one a tick
+                          presets, whole                          while idle (planner node)
+    ``KeptTrajectories``  a goal from rest along a path timed     by the keeper (plan worker,
+                          before: its fine trajectory at once,    ``cache``)
+                          final (``Serves.KEPT``)
+    the keeper            fills ``KeptTrajectories``: each path   only while the arm holds,
+                          answered from rest, then every path     SIGSTOPped otherwise (its
+                          between presets once the arm has had    own process at nice 10,
+                          no goal for a while                     ``worker.Keeper``)
+    quick -> refine       a goal from rest not kept: a quick      each such request (plan
+                          trajectory at once, the fine one takes  worker, ``worker.answer``)
+                          over at a hand-over time
+                          (``Serves.QUICK_THEN_FINE``)
+    ====================  ======================================  ============================
+
+    A goal that preempts a moving arm is timed finely at once (``Serves.AT_ONCE``): the
+    mechanisms above are for goals from rest.
+    """
+
+    def __init__(self, kept: KeptTrajectories | None = None):
+        self.kept = KeptTrajectories() if kept is None else kept
+
+    def serves(self, request: PlanRequest, plan) -> Serves:
+        if not KeptTrajectories.keepable(request, plan):
+            return Serves.AT_ONCE
+        return Serves.KEPT if self.kept.find(request, plan, touch=False) is not None \
+            else Serves.QUICK_THEN_FINE
+
+    def trajectory(self, request: PlanRequest, plan):
+        """The fine trajectory kept for ``request`` along ``plan``, or None."""
+        return self.kept.find(request, plan)
+
+    def has(self, request: PlanRequest, plan) -> bool:
+        return self.kept.find(request, plan, touch=False) is not None
+
+    def keep(self, request: PlanRequest, plan, trajectory, pinned: bool = False) -> None:
+        """Keep the keeper's fine ``trajectory``; ``pinned``: for good (between presets)."""
+        self.kept.add(request, plan, trajectory, pinned)
+
+    def __len__(self) -> int:
+        return len(self.kept)

@@ -26,12 +26,12 @@ from typing import Any, Mapping, Optional
 import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig, JOINT_NAMES
-from arm_control.control.joint_trajectory import (ErrorCode, in_arm_order, point_near,
-                                                  SplineTrajectory, start_delay_s,
-                                                  TrajectoryRefused, TrajectoryRequest)
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.world import ForbiddenSpace
 from arm_control.parameters import ParameterError, Reader
+from arm_control.plans.joint_trajectory import (ErrorCode, in_arm_order, point_near,
+                                                SplineTrajectory, start_delay_s,
+                                                TrajectoryRefused, TrajectoryRequest)
 from arm_control.timing import (time_optimal_trajectory, TrajectoryError, TrajectoryLimits)
 from arm_control.timing.timing import check
 

@@ -20,7 +20,7 @@ from typing import Optional
 import numpy as np
 
 from arm_control.config import ArmConfig, ControllerConfig
-from arm_control.control.goals import Goal
+from arm_control.plans.goals import Goal
 
 
 @dataclass(frozen=True)
