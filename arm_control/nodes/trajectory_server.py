@@ -39,6 +39,7 @@ except ImportError:                 # a machine without it: the topic only
     FollowJointTrajectory = None
 
 MONITOR_RATE_HZ = 20.0          # feedback and verdicts this often (JTC's action_monitor_rate)
+KERNELS_AFTER_S = 5.0           # the retiming's kernels loaded this long after the start
 # A trajectory that starts from a moving setpoint takes over this far ahead (s), so that the
 # checks finish before it begins.
 MOVING_LEAD_S = 0.1
@@ -96,9 +97,10 @@ class TrajectoryServer(NodePart):
         self.count = 0
         self.active = None
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='trajectories')
-        # The retiming's kernels, loaded (or compiled) first thing in the thread that retimes:
-        # a trajectory waits behind them, the node's start and its first goal do not.
-        self.worker.submit(compile_kernels)
+        # The retiming's kernels, loaded (or compiled) in the thread that retimes once the
+        # node's start is over (a trajectory before that loads them itself): loaded at start
+        # they took the CPU and Python's lock from the node's start and its first goal.
+        self.kernels_timer = node.create_timer(KERNELS_AFTER_S, self.load_kernels)
         node.create_subscription(JointTrajectory, '~/joint_trajectory', self.on_topic,
                                  COMMANDS)
         self.server = None
@@ -113,6 +115,10 @@ class TrajectoryServer(NodePart):
         # Only while a goal is followed: an idle timer would wake the executor 20 times a second.
         self.monitor_timer = node.create_timer(1.0 / MONITOR_RATE_HZ, self.monitor)
         self.monitor_timer.cancel()
+
+    def load_kernels(self) -> None:
+        self.node.destroy_timer(self.kernels_timer)
+        self.worker.submit(compile_kernels)
 
     def command(self, call, *args):
         """``call(now, *args)`` on the core under the node's lock, from any thread (none of

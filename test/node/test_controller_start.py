@@ -1,8 +1,11 @@
 """The controller node in process: before it has first looked for the planner, a goal waits
 in the queue like one that comes while it looks; once it has yielded the arm to another
-controller, it takes no settings; a goal's plan request goes out before what it said."""
+controller, it takes no settings; a goal's plan request goes out before what it said; its
+start does not load the timing's numba kernels, which only its plan worker uses for goals."""
 
 import os
+import subprocess
+import sys
 
 import rclpy
 from rclpy.parameter import Parameter
@@ -82,3 +85,27 @@ def test_a_plan_request_goes_out_before_the_goal_s_events(domain):
             node.plans.close()
             node.destroy_node()
         rclpy.try_shutdown()
+
+
+START_IN_A_FRESH_PROCESS = """
+import sys
+import rclpy
+from arm_control.nodes.controller import ControllerNode
+rclpy.init(args=['--ros-args', '-p', 'realtime_priority:=0'], domain_id=int(sys.argv[1]))
+node = ControllerNode()
+for _ in range(20):
+    rclpy.spin_once(node, timeout_sec=0.05)
+print(sorted(name for name in sys.modules if name.split('.')[0] == 'numba'))
+node.loop.stop()
+node.plans.close()
+"""
+
+
+def test_the_controller_starts_without_numba(domain):
+    """numba (a third of a second of CPU to import, as much to load the kernels) is the plan
+    worker's: the node's own start, a second of its executor included, leaves it out (the
+    trajectory server loads the kernels later, or with the first trajectory)."""
+    done = subprocess.run([sys.executable, '-c', START_IN_A_FRESH_PROCESS, str(domain)],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == '[]', done.stdout
