@@ -15,6 +15,7 @@ control_msgs the action is off, said once; the topic still works.
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+import importlib
 import math
 
 import numpy as np
@@ -97,7 +98,7 @@ class TrajectoryServer(NodePart):
         self.count = 0
         self.active = None
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='trajectories')
-        # The retiming's kernels, loaded (or compiled) in the thread that retimes once the
+        # The retiming's kernels (and the spline), loaded in the thread that retimes once the
         # node's start is over (a trajectory before that loads them itself): loaded at start
         # they took the CPU and Python's lock from the node's start and its first goal.
         self.kernels_timer = node.create_timer(KERNELS_AFTER_S, self.load_kernels)
@@ -117,8 +118,11 @@ class TrajectoryServer(NodePart):
         self.monitor_timer.cancel()
 
     def load_kernels(self) -> None:
+        """The retiming's kernels and the spline through points given without velocities,
+        in the thread that uses them."""
         self.node.destroy_timer(self.kernels_timer)
         self.worker.submit(compile_kernels)
+        self.worker.submit(importlib.import_module, 'scipy.interpolate')
 
     def command(self, call, *args):
         """``call(now, *args)`` on the core under the node's lock, from any thread (none of
