@@ -87,7 +87,7 @@ def test_a_plan_request_goes_out_before_the_goal_s_events(domain):
         rclpy.try_shutdown()
 
 
-START_IN_A_FRESH_PROCESS = """
+START_IN_A_FRESH_PROCESS = '''
 import sys
 import rclpy
 from arm_control.nodes.controller import ControllerNode
@@ -98,7 +98,7 @@ for _ in range(20):
 print(sorted(name for name in sys.modules if name.split('.')[0] == 'numba'))
 node.loop.stop()
 node.plans.close()
-"""
+'''
 
 
 def test_the_controller_starts_without_numba(domain):
