@@ -9,14 +9,13 @@ angles with ``arm_control.planning.planner.waypoints_from_poses``). An empty pat
 plan; the reason is logged.
 
 Publishes ``planned_path`` (Path, latched: the last successful plan), ``cspace_map``
-(OccupancyGrid, latched, published once at start) and ``/diagnostics``. It serves as soon as
-its grid is built; then, while idle, it loads the timing kernels its choice of elbow branch
-uses (a request before then loads them itself), builds the shortest-path trees toward every
-preset's elbow branches (``Planner.prepare``), so that plans to a preset need no search;
-then the answers from each preset's branches to every other preset (``PresetAnswers``), so
-that a goal from one preset to another is answered at once; then it proves every cell of
-joint space its checks look up (``Planner.prove_cells``), so that a goal into a part no check
-had been to does not pay for them.
+(OccupancyGrid, latched, published once at start) and ``/diagnostics``. In its first second
+it builds the shortest-path trees toward every preset's elbow branches (``Planner.prepare``),
+so that plans to a preset need no search; then, in the next few, the answers from each
+preset's branches to every other preset (``PresetAnswers``), so that a goal from one preset
+to another is answered at once; then it proves every cell of joint space its checks look up
+(``Planner.prove_cells``), so that a goal into a part no check had been to does not pay for
+them.
 
 ``cspace_map`` is the configuration space as a map in frame ``cspace`` (set RViz's fixed
 frame to it): cell (i, j) = (shoulder cell i, elbow cell j), so x is the shoulder angle and
@@ -84,6 +83,9 @@ class PlannerNode(Node):
         self.arm = ArmConfig.from_parameters(params)
         self.config = PlannerConfig.from_parameters(params)
         self.started_s = time.monotonic()
+        # The branch choice's timing kernels, before it serves: loaded for a first request
+        # on a busy machine they could take longer than the controller's planner timeout.
+        compile_kernels()
         began = time.monotonic()
         self.planner = Planner(self.arm, self.config)
         self.last_plan = None                # ((start, goal), plan): the last answer
@@ -102,13 +104,10 @@ class PlannerNode(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_service(GetPlan, 'plan_path', self.on_plan_path)
         self.create_timer(1.0, self.publish_diagnostics)
-        # While idle after start-up: the branch choice's timing kernels (compile_kernels: a
-        # request before then loads them itself), then one preset branch's tree per tick
-        # (Planner.prepare), then one answer between presets (PresetAnswers), then
-        # PROVE_TILES of the cells the checks look up (Planner.prove_cells, then the branch
-        # choice's: BranchRanking's).
+        # While idle after start-up, one preset branch's tree per tick (Planner.prepare),
+        # then one answer between presets (PresetAnswers), then PROVE_TILES of the cells the
+        # checks look up (Planner.prove_cells, then the branch choice's: BranchRanking's).
         self.to_prepare = self.ranking.preset_configurations()
-        self.kernels_loaded = False
         self.cells_proved = False
         self.prepare_timer = self.create_timer(PREPARE_PERIOD_S, self.prepare_next)
         self.map_pub.publish(self.cspace_map())
@@ -134,10 +133,7 @@ class PlannerNode(Node):
             return
         began = time.monotonic()
         try:
-            if not self.kernels_loaded:
-                compile_kernels()
-                self.kernels_loaded = True
-            elif self.to_prepare:
+            if self.to_prepare:
                 self.planner.prepare(self.to_prepare.pop(0))
             elif self.preset_answers.pending:
                 self.preset_answers.prepare_next()
