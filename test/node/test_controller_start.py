@@ -4,6 +4,7 @@ controller, it takes no settings; a goal's plan request goes out before what it 
 start does not load the timing's numba kernels, which only its plan worker uses for goals."""
 
 import os
+import signal
 import subprocess
 import sys
 
@@ -11,6 +12,7 @@ import rclpy
 from rclpy.parameter import Parameter
 
 from arm_control.control.events import EventKind as Kind
+from arm_control.nodes.common import join_early
 from arm_control.nodes.controller import ControllerNode
 
 
@@ -90,6 +92,7 @@ def test_a_plan_request_goes_out_before_the_goal_s_events(domain):
 START_IN_A_FRESH_PROCESS = '''
 import sys
 import rclpy
+from arm_control.nodes.common import join_early
 from arm_control.nodes.controller import ControllerNode
 rclpy.init(args=['--ros-args', '-p', 'realtime_priority:=0'], domain_id=int(sys.argv[1]))
 node = ControllerNode()
@@ -109,3 +112,19 @@ def test_the_controller_starts_without_numba(domain):
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == '[]', done.stdout
+
+
+def test_the_node_that_joins_early_is_hidden_and_takes_no_remaps(domain, monkeypatch):
+    """The executable's first node makes its DDS participant while the modules load; launched
+    as ``-r __node:=controller`` it must not become a second controller (the node counts
+    controllers of its name on the graph to find a rival)."""
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
+    handler = signal.getsignal(signal.SIGINT)
+    joining = join_early(['controller', '--ros-args', '-r', '__node:=controller',
+                          '-r', '__ns:=/arm1'], 'controller')
+    try:
+        assert (joining.get_name(), joining.get_namespace()) == ('_controller_joining', '/')
+    finally:
+        joining.destroy_node()
+        rclpy.try_shutdown()
+        signal.signal(signal.SIGINT, handler)
