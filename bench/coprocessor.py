@@ -2,16 +2,20 @@
 and the share of one core each process takes, holding still and touring.
 
 The installed sim, planner and controller (``test/rigs/arm_rig.py``'s ArmRig) start together on a
-ROS domain of their own. A goal (``mid_score``) is published once, as soon as the controller
-subscribes to ``goal_point``: the bench says whether it was kept or refused. If refused, it is
-sent again once the controller's diagnostics say it reaches the planner, as the ``arm`` tool
-and the tour do. Times are from the start of the processes. Then, after ``--settle`` seconds
-(the keeper times the paths between presets once the arm is idle), the CPU each process and
-its children used over ``--seconds`` of holding still, and over ``--seconds`` of touring the
+ROS domain of their own, ``--starts`` times. A goal (``mid_score``) is published once, as soon
+as the controller subscribes to ``goal_point``: the bench says whether it was kept or refused.
+If refused, it is sent again once the controller's diagnostics say it reaches the planner, as
+the ``arm`` tool and the tour do. Times are from the start of the processes ("planner
+available": when the controller said so on ``~/events``), with the CPU seconds each process
+had used when the first goal was reached (the machine may be shared: those depend less on
+its load than the wall times). After the last start, and ``--settle`` seconds (the keeper
+times the paths between presets once the arm is idle), the CPU each process and its
+children used over ``--seconds`` of holding still, and over ``--seconds`` of touring the
 presets, as a share of one core. The plan worker and its keeper are the controller's
 children, shown on their own rows.
 
     python bench/coprocessor.py                  # with install/setup.bash sourced
+    python bench/coprocessor.py --starts 1       # one start (the default: 3)
     python bench/coprocessor.py --load           # two busy loops beside it (busy.py)
     python bench/coprocessor.py --write-docs     # keep the table in docs/benchmarks/
 """
@@ -110,9 +114,12 @@ def first_goal(rig, started: float, timeout_s: float) -> dict:
     times['first goal kept'] = not rig.said('goal_rejected', sent)
 
     def planner_seen() -> bool:
-        return any(controller_sees_planner(m, '/controller') for _, m in rig.diagnostics)
+        return bool(rig.said('planner_available')) or any(
+            controller_sees_planner(m, '/controller') for _, m in rig.diagnostics)
     rig.spin_until(planner_seen, timeout_s)
-    times['planner available'] = time.monotonic() - started
+    # The event when it was heard (the diagnostics come once a second).
+    times['planner available'] = (rig.said_at('planner_available') if rig.said(
+        'planner_available') else time.monotonic()) - started
     if times['first goal kept']:
         rig.spin_until(lambda: rig.said('goal_reached', sent) or rig.said('goal_failed', sent),
                        timeout_s)
@@ -127,7 +134,20 @@ def first_goal(rig, started: float, timeout_s: float) -> dict:
     reached = rig.said('goal_reached', sent)
     times['first goal reached'] = (rig.said_at('goal_reached', sent) - started
                                    if reached else float('nan'))
+    times['CPU s'] = cpu_used(rig)
     return times
+
+
+def cpu_used(rig) -> dict:
+    """{row: CPU seconds each process has used since it started}."""
+    from arm_rig import cpu_s
+    used = {}
+    for row, pid in processes(rig).items():
+        try:
+            used[row] = cpu_s(pid)
+        except OSError:
+            used[row] = float('nan')
+    return used
 
 
 def tour_step(rig, presets):
@@ -144,29 +164,73 @@ def tour_step(rig, presets):
     return step
 
 
-def table(times: dict, holding: dict, touring: dict, load: bool, load_average: float) -> str:
-    lines = [f"load: {'two busy loops' if load else 'none added'}; the machine's load average "
-             f'over the minute before: {load_average:.1f}', '',
-             '| from the start | s |', '|---|---|']
-    for key in ('controller subscribed', 'planner available', 'first goal reached'):
-        lines.append(f'| {key} | {times[key]:.2f} |')
-    fate = ('carried out' if times['first goal carried out'] else
+def fate(times: dict) -> str:
+    return ('carried out' if times['first goal carried out'] else
             f"kept, then failed ({times['why not']})" if times['first goal kept'] else
             f"refused ({times['why not']})")
-    lines.append(f'| the goal sent at subscription | {fate} |')
-    lines += ['', '| process | holding still, % of a core | touring, % of a core |',
-              '|---|---|---|']
-    for row in sorted(set(holding) | set(touring), key=lambda r: (r == 'sim', r)):
-        lines.append(f'| {row} | {100 * holding.get(row, float("nan")):.1f} | '
-                     f'{100 * touring.get(row, float("nan")):.1f} |')
+
+
+def table(starts: list, holding: dict, touring: dict, load: bool) -> str:
+    """``starts``: each start's ``first_goal`` times, with the machine's ``load average``."""
+    columns = ' | '.join(f'start {k + 1}' for k in range(len(starts)))
+    rule = '|---' * (len(starts) + 1) + '|'
+    lines = [f"load: {'two busy loops' if load else 'none added'}", '',
+             f'| from the start, s | {columns} |', rule]
+
+    def row(name, cells):
+        lines.append(f'| {name} | ' + ' | '.join(cells) + ' |')
+    for key in ('controller subscribed', 'planner available', 'first goal reached'):
+        row(key, [f'{times[key]:.2f}' for times in starts])
+    row('the goal sent at subscription', [fate(times) for times in starts])
+    row("the machine's load average over the minute before",
+        [f"{times['load average']:.1f}" for times in starts])
+    names = sorted({r for times in starts for r in times['CPU s']},
+                   key=lambda r: (r == 'sim', r))
+    lines += ['', f'| CPU s to the first goal reached | {columns} |', rule]
+    for name in names:
+        row(name, [f"{times['CPU s'].get(name, 0.0):.2f}" for times in starts])
+    row('all but the sim', [f"{sum(v for r, v in times['CPU s'].items() if r != 'sim'):.2f}"
+                            for times in starts])
+    lines += ['', f'| process, after start {len(starts)} | holding still, % of a core | '
+              'touring, % of a core |', '|---|---|---|']
+    for name in sorted(set(holding) | set(touring), key=lambda r: (r == 'sim', r)):
+        lines.append(f'| {name} | {100 * holding.get(name, float("nan")):.1f} | '
+                     f'{100 * touring.get(name, float("nan")):.1f} |')
     others = [r for r in holding if r != 'sim']
     lines.append(f'| all but the sim | {100 * sum(holding[r] for r in others):.1f} | '
                  f'{100 * sum(touring.get(r, 0.0) for r in others):.1f} |')
     return '\n'.join(lines)
 
 
+def one_start(args, shares_too: bool):
+    """The nodes started on a domain of their own: the first goal's times, and (``shares_too``)
+    the shares of a core holding still and touring."""
+    from arm_rig import ArmRig
+    from ros_harness import Probe, ros_domain
+    load_average = os.getloadavg()[0]
+    holding = touring = {}
+    with ros_domain() as domain, tempfile.TemporaryDirectory() as logs:
+        probe = Probe(domain)
+        rig = ArmRig(domain, probe, Path(logs))
+        try:
+            started = time.monotonic()
+            rig.start_all()
+            times = first_goal(rig, started, 60.0)
+            if shares_too:
+                rig.spin_for(args.settle)
+                holding = shares(rig, args.seconds)
+                presets = {n: (x, y) for n, x, y in config.load('controller')[0].presets}
+                touring = shares(rig, args.seconds, tour_step(rig, presets))
+        finally:
+            rig.close()
+            probe.close()
+    return {**times, 'load average': load_average}, holding, touring
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--starts', type=int, default=3,
+                        help='start the nodes this many times (the shares: the last)')
     parser.add_argument('--seconds', type=float, default=10.0, help='each measurement (s)')
     parser.add_argument('--settle', type=float, default=8.0,
                         help='idle before holding is measured, for the keeper (s)')
@@ -174,28 +238,15 @@ def main():
     parser.add_argument('--write-docs', action='store_true',
                         help='keep the table in docs/benchmarks/coprocessor.md')
     args = parser.parse_args()
-    from arm_rig import ArmRig
-    from ros_harness import Probe, ros_domain
-    load_average = os.getloadavg()[0]
     loops = busy.start(2, 3600.0) if args.load else []
+    starts = []
     try:
-        with ros_domain() as domain, tempfile.TemporaryDirectory() as logs:
-            probe = Probe(domain)
-            rig = ArmRig(domain, probe, Path(logs))
-            try:
-                started = time.monotonic()
-                rig.start_all()
-                times = first_goal(rig, started, 60.0)
-                rig.spin_for(args.settle)
-                holding = shares(rig, args.seconds)
-                presets = {n: (x, y) for n, x, y in config.load('controller')[0].presets}
-                touring = shares(rig, args.seconds, tour_step(rig, presets))
-            finally:
-                rig.close()
-                probe.close()
+        for k in range(args.starts):
+            times, holding, touring = one_start(args, k == args.starts - 1)
+            starts.append(times)
     finally:
         busy.stop(loops)
-    text = table(times, holding, touring, args.load, load_average)
+    text = table(starts, holding, touring, args.load)
     print(text)
     if args.write_docs:
         command = 'python bench/coprocessor.py' + (' --load' if args.load else '')

@@ -293,12 +293,8 @@ def _note_stop(signum, frame):
     _stop_once()
 
 
-def run(node_class, args=None) -> int:
-    """The Jazzy main() shape: construct, spin, clean up on every exit path.
-
-    A bad parameter stops the node at start with the parameter named (exit code 2). A node
-    that ends by itself may say how it went in ``exit_code``.
-    """
+def start_ros(args, name: str) -> int:
+    """rclpy.init over UDP (``use_udp_transport``): 0, or 2 with the reason logged."""
     use_udp_transport()
     # Python's handler for SIGINT, marking the stop: rclpy's, installed by init, runs first
     # and then this one. A Ctrl-C that lands while rclpy converts a message taken surfaces
@@ -311,8 +307,34 @@ def run(node_class, args=None) -> int:
     except Exception as error:      # a parameter file rcl cannot parse, a bad --ros-args
         empty = _parameters_without_value(sys.argv if args is None else args)
         named = f"; parameter {', '.join(empty)} has no value" if empty else ''
-        rclpy.logging.get_logger(node_class.__name__).fatal(f'cannot start: {error}{named}')
+        rclpy.logging.get_logger(name).fatal(f'cannot start: {error}{named}')
         return 2
+    return 0
+
+
+def join_early(args, name: str):
+    """``start_ros``, then a hidden node that makes the process's DDS participant now (rclpy
+    makes it with the first node), so that it is discovered while the process still loads:
+    found later, it found the nodes already there only at their next announcement. Returns
+    the node (keep it), or the exit code. The node takes none of the command line's remaps
+    (``-r __node:=controller`` would make it a second controller)."""
+    failed = start_ros(args, name)
+    if failed:
+        return failed
+    return rclpy.create_node(f'_{name}_joining', start_parameter_services=False,
+                             enable_rosout=False, use_global_arguments=False)
+
+
+def run(node_class, args=None) -> int:
+    """The Jazzy main() shape: construct, spin, clean up on every exit path.
+
+    A bad parameter stops the node at start with the parameter named (exit code 2). A node
+    that ends by itself may say how it went in ``exit_code``.
+    """
+    if not rclpy.ok():                          # (``join_early`` may have)
+        failed = start_ros(args, node_class.__name__)
+        if failed:
+            return failed
     node = None
     try:
         node = node_class()

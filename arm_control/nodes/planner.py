@@ -83,7 +83,9 @@ class PlannerNode(Node):
         self.arm = ArmConfig.from_parameters(params)
         self.config = PlannerConfig.from_parameters(params)
         self.started_s = time.monotonic()
-        compile_kernels()                   # the branch choice's timing, before a request can
+        # The branch choice's timing kernels, before it serves: loaded for a first request
+        # on a busy machine they could take longer than the controller's planner timeout.
+        compile_kernels()
         began = time.monotonic()
         self.planner = Planner(self.arm, self.config)
         self.last_plan = None                # ((start, goal), plan): the last answer

@@ -15,6 +15,7 @@ control_msgs the action is off, said once; the topic still works.
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+import importlib
 import math
 
 import numpy as np
@@ -39,6 +40,7 @@ except ImportError:                 # a machine without it: the topic only
     FollowJointTrajectory = None
 
 MONITOR_RATE_HZ = 20.0          # feedback and verdicts this often (JTC's action_monitor_rate)
+KERNELS_AFTER_S = 5.0           # the retiming's kernels loaded this long after the start
 # A trajectory that starts from a moving setpoint takes over this far ahead (s), so that the
 # checks finish before it begins.
 MOVING_LEAD_S = 0.1
@@ -96,9 +98,10 @@ class TrajectoryServer(NodePart):
         self.count = 0
         self.active = None
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='trajectories')
-        # The retiming's kernels, loaded (or compiled) first thing in the thread that retimes:
-        # a trajectory waits behind them, the node's start and its first goal do not.
-        self.worker.submit(compile_kernels)
+        # The retiming's kernels (and the spline), loaded in the thread that retimes once the
+        # node's start is over (a trajectory before that loads them itself): loaded at start
+        # they took the CPU and Python's lock from the node's start and its first goal.
+        self.kernels_timer = node.create_timer(KERNELS_AFTER_S, self.load_kernels)
         node.create_subscription(JointTrajectory, '~/joint_trajectory', self.on_topic,
                                  COMMANDS)
         self.server = None
@@ -113,6 +116,13 @@ class TrajectoryServer(NodePart):
         # Only while a goal is followed: an idle timer would wake the executor 20 times a second.
         self.monitor_timer = node.create_timer(1.0 / MONITOR_RATE_HZ, self.monitor)
         self.monitor_timer.cancel()
+
+    def load_kernels(self) -> None:
+        """The retiming's kernels and the spline through points given without velocities,
+        in the thread that uses them."""
+        self.node.destroy_timer(self.kernels_timer)
+        self.worker.submit(compile_kernels)
+        self.worker.submit(importlib.import_module, 'scipy.interpolate')
 
     def command(self, call, *args):
         """``call(now, *args)`` on the core under the node's lock, from any thread (none of

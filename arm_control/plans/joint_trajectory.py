@@ -20,7 +20,6 @@ import math
 from typing import Optional, Sequence
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from arm_control.config import JOINT_NAMES
 
@@ -193,6 +192,7 @@ class SplineTrajectory:
         n = len(self.times_s)
         qd = knots.velocities
         if qd is None and n > 1:
+            from scipy.interpolate import CubicSpline   # here: a tenth of a second to import
             spline = CubicSpline(self.times_s, self.q, axis=0,
                                  bc_type=((1, np.asarray(start_qd, float)), (1, np.zeros(2))))
             qd = spline(times, 1)

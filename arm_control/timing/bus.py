@@ -11,11 +11,11 @@ the brownout voltage (plus a margin) while the voltages stay within it
 
 import math
 
-import numba
 import numpy as np
 
 from arm_control.model.dynamics import COULOMB_SMOOTHING_RAD_S
 from arm_control.timing.exact import compile_passes, kernel_array, OnePath
+from arm_control.timing.kernels import kernel
 from arm_control.timing.limits import TrajectoryLimits, window
 from arm_control.timing.path import BUS_GRID, grid_for
 from arm_control.timing.rows import (LEAST_HALF_WIDTH_V, PathTerms, rows, speed_caps)
@@ -104,7 +104,7 @@ class BusSag:
         return fits and not relaxing
 
 
-@numba.njit(cache=True)
+@kernel
 def _judge(x, sag, unsafe, steps, constants, a, b, c, d, emf, dq, centre, half):
     """``BusSag.settle``'s verdict on the timing x made with ``sag``, per grid point i
     (compiled: a few dozen points, where numpy's calls cost more than the arithmetic):

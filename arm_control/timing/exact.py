@@ -1,13 +1,14 @@
 """The exact time-optimal timing of paths that start from rest (or a given path speed) and
 end at rest, back-EMF kept exactly: the closed-form backward and forward passes of the
 classical time-optimal parameterisation on a grid, for many paths at once (the shape search)
-or one, compiled with numba.
+or one, compiled with numba (at first use: ``kernels``).
 """
 
 import math
 
-import numba
 import numpy as np
+
+from arm_control.timing.kernels import kernel
 
 
 def kernel_array(values) -> np.ndarray:
@@ -36,7 +37,7 @@ def fastest_speeds(A, B, C, D, W, top, steps, start_speed=0.0):
     return _fastest(A, B, C, D, W, top, 2.0 * np.asarray(steps, float), float(start_speed))
 
 
-@numba.njit(cache=True)
+@kernel
 def _fastest(A, B, C, D, W, top, twice, start_speed):
     """``fastest_speeds`` compiled (a few dozen points per path, where numpy's calls cost
     more than the arithmetic): per path, the top speed over every ordered pair of rows and
@@ -98,7 +99,7 @@ def _fastest(A, B, C, D, W, top, twice, start_speed):
     return speed
 
 
-@numba.njit(cache=True)
+@kernel
 def _first_positive_root(alpha, beta, gamma):
     """The least y > 0 with α·y² + β·y + γ = 0, for γ ≥ 0 (α·y² + β·y + γ ≥ 0 on [0, y]);
     inf when there is none, 0 when γ < 0. Written y = 2γ/(√(β² − 4αγ) − β): no cancellation,
@@ -162,7 +163,7 @@ class OnePath:
                          self.backward, self.forward, float(start_speed))
 
 
-@numba.njit(cache=True)
+@kernel
 def _one_path(W, sag, narrowed, voltage_rows, least, j, m, size_m, size_j, alpha, beta,
               constant, top, sign_c, bounded, inverse, twice, backward, forward,
               start_speed):
@@ -212,7 +213,7 @@ def compile_passes() -> None:
     path.speeds(np.ones(2))
 
 
-@numba.njit(cache=True)
+@kernel
 def _passes_one_path(backward, forward, top, twice, start_speed):
     """``fastest_speeds``' backward and forward passes for one path (compiled: a scalar
     recursion, stage after stage, that numpy cannot vectorise). Per stage and row: the s̈

@@ -1,8 +1,11 @@
 """The controller node in process: before it has first looked for the planner, a goal waits
 in the queue like one that comes while it looks; once it has yielded the arm to another
-controller, it takes no settings; a goal's plan request goes out before what it said."""
+controller, it takes no settings; a goal's plan request goes out before what it said; its
+start does not load the timing's numba kernels, which only its plan worker uses for goals."""
 
 import os
+import subprocess
+import sys
 
 import pytest
 import rclpy
@@ -69,3 +72,44 @@ def test_a_plan_request_goes_out_before_the_goal_s_events(controller):
     controller.publish_outputs()
     assert [kind for kind, _ in order] == ['request', 'event']
     assert order[0][1] == ('a request',)
+
+
+START_IN_A_FRESH_PROCESS = '''
+import sys
+import rclpy
+from arm_control.nodes.common import join_early
+from arm_control.nodes.controller import ControllerNode
+rclpy.init(args=['--ros-args', '-p', 'realtime_priority:=0'], domain_id=int(sys.argv[1]))
+node = ControllerNode()
+for _ in range(20):
+    rclpy.spin_once(node, timeout_sec=0.05)
+print(sorted(name for name in sys.modules if name.split('.')[0] == 'numba'))
+node.loop.stop()
+node.plans.close()
+'''
+
+
+def test_the_controller_starts_without_numba(domain):
+    """numba (a third of a second of CPU to import, as much to load the kernels) is the plan
+    worker's: the node's own start, a second of its executor included, leaves it out (the
+    trajectory server loads the kernels later, or with the first trajectory)."""
+    done = subprocess.run([sys.executable, '-c', START_IN_A_FRESH_PROCESS, str(domain)],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == '[]', done.stdout
+
+
+def test_the_node_that_joins_early_is_hidden_and_takes_no_remaps(domain, monkeypatch):
+    """The executable's first node makes its DDS participant while the modules load; launched
+    as ``-r __node:=controller`` it must not become a second controller (the node counts
+    controllers of its name on the graph to find a rival)."""
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
+    handler = signal.getsignal(signal.SIGINT)
+    joining = join_early(['controller', '--ros-args', '-r', '__node:=controller',
+                          '-r', '__ns:=/arm1'], 'controller')
+    try:
+        assert (joining.get_name(), joining.get_namespace()) == ('_controller_joining', '/')
+    finally:
+        joining.destroy_node()
+        rclpy.try_shutdown()
+        signal.signal(signal.SIGINT, handler)
