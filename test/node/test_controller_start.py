@@ -4,6 +4,7 @@ controller, it takes no settings; a goal's plan request goes out before what it 
 start does not load the timing's numba kernels, which only its plan worker uses for goals."""
 
 import os
+import signal
 import subprocess
 import sys
 
@@ -12,6 +13,7 @@ import rclpy
 from rclpy.parameter import Parameter
 
 from arm_control.control.events import EventKind as Kind
+from arm_control.nodes.common import join_early
 from arm_control.nodes.controller import ControllerNode
 
 
