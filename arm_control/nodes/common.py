@@ -15,7 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.callback_groups import CallbackGroup
-from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -185,6 +185,14 @@ def output(node, kind, topic: str, qos):
     return node.create_publisher(kind, topic, qos,
                                  event_callbacks=PublisherEventCallbacks(
                                      use_default_callbacks=False))
+
+
+def listen(node, kind, topic: str, handler, qos, callback_group=None):
+    """A subscription with no QoS event handlers, as ``output``'s publishers: a publisher
+    whose QoS or type does not match says so itself (rclpy's and rclcpp's do by default)."""
+    return node.create_subscription(kind, topic, handler, qos, callback_group=callback_group,
+                                    event_callbacks=SubscriptionEventCallbacks(
+                                        use_default_callbacks=False))
 
 
 class Drained(CallbackGroup):

@@ -30,7 +30,7 @@ from arm_control.control.motions import Motion
 from arm_control.control.state_machine import STOPPED
 from arm_control.control.trajectory_goals import FollowSettings, TrajectoryGoals, TrajectoryWatch
 from arm_control.nodes import messages
-from arm_control.nodes.common import COMMANDS, guarded, NodePart
+from arm_control.nodes.common import COMMANDS, guarded, listen, NodePart
 from arm_control.timing.bus import compile_kernels
 
 try:
@@ -99,8 +99,7 @@ class TrajectoryServer(NodePart):
         # The retiming's kernels, loaded (or compiled) first thing in the thread that retimes:
         # a trajectory waits behind them, the node's start and its first goal do not.
         self.worker.submit(compile_kernels)
-        node.create_subscription(JointTrajectory, '~/joint_trajectory', self.on_topic,
-                                 COMMANDS)
+        listen(node, JointTrajectory, '~/joint_trajectory', self.on_topic, COMMANDS)
         self.server = None
         if FollowJointTrajectory is None:
             node.get_logger().warning(
