@@ -301,8 +301,9 @@ def _note_stop(signum, frame):
     _stop_once()
 
 
-def run(node_class, args=None) -> int:
-    """The Jazzy main() shape: construct, spin, clean up on every exit path.
+def run(node_class, args=None, executor_class=None) -> int:
+    """The Jazzy main() shape: construct, spin (on the global executor, or a new
+    ``executor_class``), clean up on every exit path.
 
     A bad parameter stops the node at start with the parameter named (exit code 2). A node
     that ends by itself may say how it went in ``exit_code``.
@@ -327,7 +328,7 @@ def run(node_class, args=None) -> int:
         # What start-up made lives as long as the node: keep it out of the collector's full
         # passes, which otherwise stop every thread for ~0.1 s now and then.
         gc.freeze()
-        rclpy.spin(node)
+        rclpy.spin(node, None if executor_class is None else executor_class())
     except (ParameterError, ParameterException) as error:
         rclpy.logging.get_logger(node_class.__name__).fatal(f'bad parameter: {error}')
         return 2

@@ -47,6 +47,7 @@ from arm_control.nodes.common import (COMMANDS, declare_parameters, interrupt, L
 from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.controller_watch import ControllerWatch
 from arm_control.nodes.plan_link import PlanLink
+from arm_control.nodes.quiet_executor import QuietExecutor
 from arm_control.nodes.sensor_inputs import SensorInputs
 from arm_control.nodes.trajectory_server import TrajectoryServer
 from arm_control.parameters import ParameterError
@@ -315,7 +316,7 @@ def controller_node() -> ControllerNode:
 
 
 def main(args=None):
-    sys.exit(run(controller_node, args))
+    sys.exit(run(controller_node, args, QuietExecutor))
 
 
 if __name__ == '__main__':
