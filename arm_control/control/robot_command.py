@@ -52,9 +52,10 @@ ARRIVAL_MARGIN_S = 0.001
 # so every command acts one period after the reading it answers, whatever the phase ...
 TICK_AFTER_INSTANT_S = 0.003
 # ... or, where readings take longer to come, READING_MARGIN_S after most of them have
-# (ARRIVAL_QUANTILE of the last CLOCK_WINDOW), when that leaves COMMAND_WAY_S for the command
-# to reach the robot before its next instant. Ticked before its reading, a command answers
-# the one a period older: the arm a period later, and two periods of prediction.
+# (ARRIVAL_QUANTILE of the last CLOCK_WINDOW), at the latest COMMAND_WAY_S before the next
+# instant (for the command to reach the robot), and only if half of them have come by then.
+# Ticked before its reading, a command answers the one a period older: the arm a period
+# later, and two periods of prediction.
 ARRIVAL_QUANTILE = 0.9
 READING_MARGIN_S = 0.001
 COMMAND_WAY_S = 0.005
@@ -108,12 +109,11 @@ class RobotClock:
     def tick_after_s(self) -> float:
         """How long after each instant to tick (the module's rule)."""
         ages = sorted(tuple(self.ages_s))
-        if not ages:
-            return TICK_AFTER_INSTANT_S
-        come_s = ages[min(int(ARRIVAL_QUANTILE * len(ages)), len(ages) - 1)] + READING_MARGIN_S
-        if come_s > self.period_s - COMMAND_WAY_S:
+        latest_s = self.period_s - COMMAND_WAY_S
+        if not ages or ages[len(ages) // 2] + READING_MARGIN_S > latest_s:
             return TICK_AFTER_INSTANT_S        # too late to answer: a period later, as ever
-        return max(come_s, TICK_AFTER_INSTANT_S)
+        come_s = ages[min(int(ARRIVAL_QUANTILE * len(ages)), len(ages) - 1)] + READING_MARGIN_S
+        return min(max(come_s, TICK_AFTER_INSTANT_S), latest_s)
 
     def acting_at(self, arrives_s: float) -> float:
         """The instant a command expected to arrive at ``arrives_s`` is computed for."""

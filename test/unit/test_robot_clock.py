@@ -215,16 +215,22 @@ def test_on_the_robot_loop_a_move_takes_as_long_as_with_commands_on_arrival(
 
 def test_the_controller_ticks_once_most_readings_have_come_if_it_can_still_answer():
     """After the instant by TICK_AFTER_INSTANT_S, or READING_MARGIN_S after the arrival most
-    readings make; never so late that the command cannot reach the next instant."""
+    readings make; never so late that the command cannot reach the next instant, and not
+    later for readings that mostly come after that."""
     clock = RobotClock(PERIOD_S)
     assert clock.tick_after_s() == robot_command.TICK_AFTER_INSTANT_S
     for age_s in [0.008] * 20 + [0.019]:                     # one slow reading
         clock.arrived(age_s)
     assert clock.tick_after_s() == pytest.approx(0.008 + robot_command.READING_MARGIN_S)
     clock.arrived(-0.003)                                   # another host's clock: not read
-    slow = RobotClock(PERIOD_S)
+    latest_s = PERIOD_S - robot_command.COMMAND_WAY_S
+    late = RobotClock(PERIOD_S)                             # most come just before the latest
+    for age_s in np.linspace(latest_s - 0.0025, latest_s - 0.0002, 10):
+        late.arrived(age_s)
+    assert late.tick_after_s() == pytest.approx(latest_s)
+    slow = RobotClock(PERIOD_S)                             # half come after it
     for _ in range(10):
-        slow.arrived(PERIOD_S - robot_command.COMMAND_WAY_S)
+        slow.arrived(latest_s)
     assert slow.tick_after_s() == robot_command.TICK_AFTER_INSTANT_S
 
 
