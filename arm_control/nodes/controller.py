@@ -7,12 +7,12 @@ sentence"), ``/diagnostics`` and ``voltage_command_claim`` (``claim_link``). Cli
 ``plan_path``. Gains, reserves, tolerances, dwell and presets change at run time (``TUNABLE``).
 
 Three threads of work: the control loop (``ControlLoop``) steps the core and commands the
-motors; the executor takes messages and services (at ``EXECUTOR_PRIORITY``, below the loop,
-as is the thread that hands the core its timed plans); a worker process times plans, and
-its keeper keeps fine trajectories (``PlanLink``). The core is shared under a lock held only
-for quick calls and the publishing of a command (a write that DDS blocks holds Python's own
-lock too: the process waits either way). On exit: its last profile again (a stop to rest,
-held), or 0 V sending volts or unpowered.
+motors; the executor (``QuietExecutor``) takes messages and services (at
+``EXECUTOR_PRIORITY``, below the loop, as is the thread that hands the core its timed plans);
+a worker process times plans, and its keeper keeps fine trajectories (``PlanLink``). The core
+is shared under a lock held only for quick calls and the publishing of a command (a write
+that DDS blocks holds Python's own lock too: the process waits either way). On exit: its
+last profile again (a stop to rest, held), or 0 V sending volts or unpowered.
 """
 
 import signal

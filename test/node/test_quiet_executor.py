@@ -6,8 +6,8 @@ import time
 
 import pytest
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 import rclpy.executors
+from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import Int32
 
 from arm_control.nodes.quiet_executor import QuietExecutor
