@@ -21,7 +21,7 @@ from std_msgs.msg import Header
 from arm_control.control.commanders import Claim, CLAIM_EVERY_S, CLAIM_STALE_S, Commanders
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.state_machine import ArmState
-from arm_control.nodes.common import LATCHED
+from arm_control.nodes.common import LATCHED, listen, output
 
 TOPIC = 'voltage_command_claim'
 TOKEN_CHARS = 64            # a claim's token longer than this is not a controller's
@@ -38,8 +38,8 @@ class ClaimLink:
         self.lock = threading.Lock()
         self.listen_until_s = -math.inf  # wall s: silent until then, unless a claim is heard
         self.node = node
-        self.publisher = node.create_publisher(Header, TOPIC, LATCHED)
-        node.create_subscription(Header, TOPIC, self.on_claim, LATCHED)
+        self.publisher = output(node, Header, TOPIC, LATCHED)
+        listen(node, Header, TOPIC, self.on_claim, LATCHED)
         node.create_timer(CLAIM_EVERY_S, self.say)
 
     def on_claim(self, msg: Header) -> None:

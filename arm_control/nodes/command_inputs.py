@@ -15,7 +15,7 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from arm_control.nodes import messages
-from arm_control.nodes.common import guarded, NodePart
+from arm_control.nodes.common import guarded, listen, NodePart
 
 # Goals, presets, driver commands kept until taken: answered or counted (``InputGate``).
 GOALS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
@@ -30,7 +30,7 @@ class CommandInputs(NodePart):
                 ('goal_point', PointStamped, self.on_goal_point),
                 ('goal_preset', String, self.on_goal_preset),
                 ('driver_velocity', TwistStamped, self.on_driver)):
-            node.create_subscription(kind, topic, handler, GOALS)
+            listen(node, kind, topic, handler, GOALS)
         core = node.core
         for name, call in (('~/estop', core.estop), ('~/reset', core.reset),
                            ('~/cancel', core.cancel)):

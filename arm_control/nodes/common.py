@@ -15,7 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.callback_groups import CallbackGroup
-from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -187,6 +187,14 @@ def output(node, kind, topic: str, qos):
                                      use_default_callbacks=False))
 
 
+def listen(node, kind, topic: str, handler, qos, callback_group=None):
+    """A subscription with no QoS event handlers, as ``output``'s publishers: a publisher
+    whose QoS or type does not match says so itself (rclpy's and rclcpp's do by default)."""
+    return node.create_subscription(kind, topic, handler, qos, callback_group=callback_group,
+                                    event_callbacks=SubscriptionEventCallbacks(
+                                        use_default_callbacks=False))
+
+
 class Drained(CallbackGroup):
     """Subscriptions no executor waits on or calls back: their messages stay in their readers
     until the node takes them (``take_all``). For inputs read only beside another, that comes
@@ -325,8 +333,9 @@ def join_early(args, name: str):
                              enable_rosout=False, use_global_arguments=False)
 
 
-def run(node_class, args=None) -> int:
-    """The Jazzy main() shape: construct, spin, clean up on every exit path.
+def run(node_class, args=None, executor_class=None) -> int:
+    """The Jazzy main() shape: construct, spin (on the global executor, or a new
+    ``executor_class``), clean up on every exit path.
 
     A bad parameter stops the node at start with the parameter named (exit code 2). A node
     that ends by itself may say how it went in ``exit_code``.
@@ -341,7 +350,7 @@ def run(node_class, args=None) -> int:
         # What start-up made lives as long as the node: keep it out of the collector's full
         # passes, which otherwise stop every thread for ~0.1 s now and then.
         gc.freeze()
-        rclpy.spin(node)
+        rclpy.spin(node, None if executor_class is None else executor_class())
     except (ParameterError, ParameterException) as error:
         rclpy.logging.get_logger(node_class.__name__).fatal(f'bad parameter: {error}')
         return 2

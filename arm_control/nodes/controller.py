@@ -7,12 +7,12 @@ sentence"), ``/diagnostics`` and ``voltage_command_claim`` (``claim_link``). Cli
 ``plan_path``. Gains, reserves, tolerances, dwell and presets change at run time (``TUNABLE``).
 
 Three threads of work: the control loop (``ControlLoop``) steps the core and commands the
-motors; the executor takes messages and services (at ``EXECUTOR_PRIORITY``, below the loop,
-as is the thread that hands the core its timed plans); a worker process times plans, and
-its keeper keeps fine trajectories (``PlanLink``). The core is shared under a lock held only
-for quick calls and the publishing of a command (a write that DDS blocks holds Python's own
-lock too: the process waits either way). On exit: its last profile again (a stop to rest,
-held), or 0 V sending volts or unpowered.
+motors; the executor (``QuietExecutor``) takes messages and services (at
+``EXECUTOR_PRIORITY``, below the loop, as is the thread that hands the core its timed plans);
+a worker process times plans, and its keeper keeps fine trajectories (``PlanLink``). The core
+is shared under a lock held only for quick calls and the publishing of a command (a write
+that DDS blocks holds Python's own lock too: the process waits either way). On exit: its
+last profile again (a stop to rest, held), or 0 V sending volts or unpowered.
 """
 
 import signal
@@ -47,6 +47,7 @@ from arm_control.nodes.common import (COMMANDS, declare_parameters, interrupt, L
 from arm_control.nodes.control_loop import ControlLoop
 from arm_control.nodes.controller_watch import ControllerWatch
 from arm_control.nodes.plan_link import PlanLink
+from arm_control.nodes.quiet_executor import QuietExecutor
 from arm_control.nodes.sensor_inputs import SensorInputs
 from arm_control.nodes.trajectory_server import TrajectoryServer
 from arm_control.parameters import ParameterError
@@ -315,7 +316,7 @@ def controller_node() -> ControllerNode:
 
 
 def main(args=None):
-    sys.exit(run(controller_node, args))
+    sys.exit(run(controller_node, args, QuietExecutor))
 
 
 if __name__ == '__main__':

@@ -11,7 +11,8 @@ from sensor_msgs.msg import BatteryState, JointState
 
 from arm_control.control.sensing import SensorReading
 from arm_control.nodes import messages
-from arm_control.nodes.common import Drained, guarded, NodePart, STATE_STREAM, take_all
+from arm_control.nodes.common import (Drained, guarded, listen, NodePart, STATE_STREAM,
+                                      take_all)
 
 # A reading is timed at its stamp when that is at most this long before its arrival, and
 # not after it (the stamp on this host's clock); else at its arrival.
@@ -31,10 +32,9 @@ class SensorInputs(NodePart):
         # In the executor's thread, as each arrives: an rcl subscription is not to be taken
         # from by one thread while another waits on it (a controller taking joint_states in
         # its loop's thread died of a corrupted heap beside two busy loops).
-        self.joint_states_sub = node.create_subscription(
-            JointState, 'joint_states', self.on_joint_states, STATE_STREAM)
-        self.beside = [(node.create_subscription(kind, topic, handler, STATE_STREAM,
-                                                 callback_group=Drained()), handler)
+        self.joint_states_sub = listen(node, JointState, 'joint_states', self.on_joint_states,
+                                       STATE_STREAM)
+        self.beside = [(listen(node, kind, topic, handler, STATE_STREAM, Drained()), handler)
                        for topic, kind, handler in (
                            ('motor_encoders', JointState, self.on_encoders),
                            ('battery_state', BatteryState, self.on_battery))]
@@ -65,6 +65,7 @@ class SensorInputs(NodePart):
         age_s = now - stamp
         if math.isfinite(age_s):
             self.reading_ages_s.append(age_s)
+            self.node.commander.clock.arrived(age_s)      # when to tick (real time)
 
         def fresh(latest, missing):
             return latest[0] if latest is not None and \

@@ -27,7 +27,7 @@ from arm_control.config import JOINT_NAMES
 from arm_control.control.motions import Motion
 from arm_control.control.state_machine import STOPPED
 from arm_control.nodes import messages
-from arm_control.nodes.common import COMMANDS, guarded, NodePart
+from arm_control.nodes.common import COMMANDS, guarded, listen, NodePart
 from arm_control.plans.goals import Goal
 from arm_control.plans.joint_trajectory import (ErrorCode, JointTolerance, TrajectoryPoint,
                                                 TrajectoryRefused, TrajectoryRequest)
@@ -102,8 +102,7 @@ class TrajectoryServer(NodePart):
         # node's start is over (a trajectory before that loads them itself): loaded at start
         # they took the CPU and Python's lock from the node's start and its first goal.
         self.kernels_timer = node.create_timer(KERNELS_AFTER_S, self.load_kernels)
-        node.create_subscription(JointTrajectory, '~/joint_trajectory', self.on_topic,
-                                 COMMANDS)
+        listen(node, JointTrajectory, '~/joint_trajectory', self.on_topic, COMMANDS)
         self.server = None
         if FollowJointTrajectory is None:
             node.get_logger().warning(

@@ -18,7 +18,7 @@ class Graph:
         self.claimers = claimers
         self.sent = []
 
-    def create_publisher(self, *_):
+    def create_publisher(self, *_, **__):
         graph = self
 
         class Publisher:
@@ -26,7 +26,7 @@ class Graph:
                 graph.sent.append(msg)
         return Publisher()
 
-    def create_subscription(self, *_):
+    def create_subscription(self, *_, **__):
         return None
 
     def create_timer(self, *_):

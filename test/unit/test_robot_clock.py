@@ -211,3 +211,42 @@ def test_on_the_robot_loop_a_move_takes_as_long_as_with_commands_on_arrival(
     (plain volts computed for their arrival, as before, fail this at both phases)."""
     reference = _move_s(arm, controller_config, planner, 'volts', 0, robot_loop=False)
     assert _move_s(arm, controller_config, planner, 'profile', phase_ms) < 1.05 * reference
+
+
+def test_the_controller_ticks_once_most_readings_have_come_if_it_can_still_answer():
+    """After the instant by TICK_AFTER_INSTANT_S, or READING_MARGIN_S after the arrival most
+    readings make; never so late that the command cannot reach the next instant, and not
+    later for readings that mostly come after that."""
+    clock = RobotClock(PERIOD_S)
+    assert clock.tick_after_s() == robot_command.TICK_AFTER_INSTANT_S
+    for age_s in [0.008] * 20 + [0.019]:                     # one slow reading
+        clock.arrived(age_s)
+    assert clock.tick_after_s() == pytest.approx(0.008 + robot_command.READING_MARGIN_S)
+    clock.arrived(-0.003)                                   # another host's clock: not read
+    latest_s = PERIOD_S - robot_command.COMMAND_WAY_S
+    late = RobotClock(PERIOD_S)                             # most come just before the latest
+    for age_s in np.linspace(latest_s - 0.0025, latest_s - 0.0002, 10):
+        late.arrived(age_s)
+    assert late.tick_after_s() == pytest.approx(latest_s)
+    slow = RobotClock(PERIOD_S)                             # half come after it
+    for _ in range(10):
+        slow.arrived(latest_s)
+    assert slow.tick_after_s() == robot_command.TICK_AFTER_INSTANT_S
+
+
+@pytest.mark.parametrize('transit_ms', [1, 8, 13])
+def test_each_command_answers_the_reading_of_the_instant_before_it_acts(
+        arm, controller_config, transit_ms):
+    """Readings that reach the controller up to 13 ms after their instant: each step's
+    estimate is predicted one period from its reading, not two (a period's latency and a
+    second prediction a tick)."""
+    loop = RobotLoop(arm, controller_config, start=(0.0, 1.75), mode='profile', seed=1,
+                     reading_transit_s=transit_ms / 1000.0)
+    horizons = []
+
+    def step_horizon():
+        horizons.append(loop.core.sensing.time_s - loop.core.sensing.last_reading_s)
+        return False
+    loop.run(0.5)
+    loop.run(1.0, step_horizon)
+    assert np.max(horizons) == pytest.approx(PERIOD_S, abs=1e-6)
