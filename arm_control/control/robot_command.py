@@ -49,16 +49,8 @@ AHEAD = 3                     # setpoints along the motion before the stop
 ARRIVAL_MARGIN_S = 0.001
 # Sending profiles, the controller ticks this long after each of the robot's instants: the
 # instant's reading has come, and the command reaches the robot well before the next one,
-# so every command acts one period after the reading it answers, whatever the phase ...
+# so every command acts one period after the reading it answers, whatever the phase.
 TICK_AFTER_INSTANT_S = 0.003
-# ... or, where readings take longer to come, READING_MARGIN_S after most of them have
-# (ARRIVAL_QUANTILE of the last CLOCK_WINDOW), at the latest COMMAND_WAY_S before the next
-# instant (for the command to reach the robot), and only if half of them have come by then.
-# Ticked before its reading, a command answers the one a period older: the arm a period
-# later, and two periods of prediction.
-ARRIVAL_QUANTILE = 0.9
-READING_MARGIN_S = 0.001
-COMMAND_WAY_S = 0.005
 CLOCK_WINDOW = 25             # readings' gaps the robot's period is the median of
 MAX_GAP_PERIODS = 10          # a stamp further ahead than this many periods is off the grid
 OFF_GRID_TO_FOLLOW = 5        # readings in a row off the grid before it follows (a moved loop)
@@ -73,7 +65,6 @@ class RobotClock:
         self.last_s = None                     # the latest reading's stamp
         self.gaps_s = deque(maxlen=CLOCK_WINDOW)
         self.off_grid = 0                      # readings in a row off the loop's grid
-        self.ages_s = deque(maxlen=CLOCK_WINDOW)   # arrival less stamp of the last readings
 
     def observe(self, stamp_s: float) -> None:
         """A reading stamped ``stamp_s`` (s); a missed reading leaves a gap of whole periods."""
@@ -99,21 +90,6 @@ class RobotClock:
                                     2.0 * self.nominal_period_s)
         self.off_grid = 0
         self.last_s = float(stamp_s)
-
-    def arrived(self, age_s: float) -> None:
-        """A reading came ``age_s`` after its stamp (both on this host's clock; may be called
-        from another thread than the one that reads ``tick_after_s``)."""
-        if 0.0 <= age_s < self.period_s:
-            self.ages_s.append(float(age_s))
-
-    def tick_after_s(self) -> float:
-        """How long after each instant to tick (the module's rule)."""
-        ages = sorted(tuple(self.ages_s))
-        latest_s = self.period_s - COMMAND_WAY_S
-        if not ages or ages[len(ages) // 2] + READING_MARGIN_S > latest_s:
-            return TICK_AFTER_INSTANT_S        # too late to answer: a period later, as ever
-        come_s = ages[min(int(ARRIVAL_QUANTILE * len(ages)), len(ages) - 1)] + READING_MARGIN_S
-        return min(max(come_s, TICK_AFTER_INSTANT_S), latest_s)
 
     def acting_at(self, arrives_s: float) -> float:
         """The instant a command expected to arrive at ``arrives_s`` is computed for."""
@@ -141,15 +117,14 @@ class Commander:
 
     def tick_due(self, due_s: float) -> float:
         """The controller's next tick, due at ``due_s``, moved to the nearest time
-        ``RobotClock.tick_after_s`` after a robot instant -- when sending profiles to a robot
+        ``TICK_AFTER_INSTANT_S`` after a robot instant -- when sending profiles to a robot
         whose loop runs at the controller's rate (within 1 %); else ``due_s``."""
         clock = self.clock
         if not self.profiles or clock.last_s is None or \
                 abs(clock.period_s - self.period_s) > 0.01 * self.period_s:
             return due_s
-        after_s = clock.tick_after_s()
-        periods = round((due_s - after_s - clock.last_s) / clock.period_s)
-        return clock.last_s + periods * clock.period_s + after_s
+        periods = round((due_s - TICK_AFTER_INSTANT_S - clock.last_s) / clock.period_s)
+        return clock.last_s + periods * clock.period_s + TICK_AFTER_INSTANT_S
 
     def acts_s(self, arrives_s: float) -> float:
         """When a command that arrives at ``arrives_s`` acts, as the core computes it."""

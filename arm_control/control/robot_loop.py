@@ -126,8 +126,6 @@ class RobotLoop:
         heard = [r for r in self.readings if r[0] <= now_ms]
         self.readings = [r for r in self.readings if r[0] > now_ms]
         stamp_s, reading = (heard[-1][1], heard[-1][2]) if heard else (None, None)
-        for arrives_ms, stamped_s, _ in heard:
-            self.clock.arrived(arrives_ms / 1000.0 - stamped_s)
         if stamp_s is not None:
             self.clock.observe(stamp_s)
         arrives_s = (now_ms + self.lag_ms) / 1000.0

@@ -65,7 +65,6 @@ class SensorInputs(NodePart):
         age_s = now - stamp
         if math.isfinite(age_s):
             self.reading_ages_s.append(age_s)
-            self.node.commander.clock.arrived(age_s)      # when to tick (real time)
 
         def fresh(latest, missing):
             return latest[0] if latest is not None and \
