@@ -4,6 +4,7 @@ domains for process-level tests. The tests mirror the package: ``unit`` (pure mo
 ``package`` (lint, docs, layers, the installed layout); what they share is in ``rigs``."""
 
 import dataclasses
+import os
 from pathlib import Path
 import sys
 
@@ -13,6 +14,17 @@ from arm_control import config
 from arm_control.planning.planner import Planner
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / 'rigs'))
+
+
+@pytest.fixture(autouse=True)
+def environment_kept():
+    """Each test leaves this process's environment as it found it: one that starts rclpy the
+    nodes' way sets Fast DDS variables in it (``use_udp_transport``), and the processes later
+    tests start would inherit them."""
+    saved = dict(os.environ)
+    yield
+    os.environ.clear()
+    os.environ.update(saved)
 
 
 @pytest.fixture(scope='session')
