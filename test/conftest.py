@@ -42,6 +42,25 @@ def planner(arm):
     return Planner(arm, config.load('planner')[1])
 
 
+@pytest.fixture
+def controller(domain):
+    """A controller node in process, constructed and not spun. At real-time priority it
+    would raise this thread, pytest's, for every later test."""
+    import rclpy
+    from arm_control.nodes.controller import ControllerNode
+    rclpy.init(args=['--ros-args', '-p', 'realtime_priority:=0'], domain_id=domain)
+    node = None
+    try:
+        node = ControllerNode()
+        yield node
+    finally:
+        if node is not None:
+            node.loop.stop()
+            node.plans.close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
 @pytest.fixture(scope='module')
 def frc():
     """The competition robot's arm and a planner on it at the file's resolution (1°)."""

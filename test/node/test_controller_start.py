@@ -8,30 +8,11 @@ import signal
 import subprocess
 import sys
 
-import pytest
 import rclpy
 from rclpy.parameter import Parameter
 
 from arm_control.control.events import EventKind as Kind
 from arm_control.nodes.common import join_early
-from arm_control.nodes.controller import ControllerNode
-
-
-@pytest.fixture
-def controller(domain):
-    """A controller node constructed and not spun. At real-time priority it would raise this
-    thread, pytest's, for every later test."""
-    rclpy.init(args=['--ros-args', '-p', 'realtime_priority:=0'], domain_id=domain)
-    node = None
-    try:
-        node = ControllerNode()
-        yield node
-    finally:
-        if node is not None:
-            node.loop.stop()
-            node.plans.close()
-            node.destroy_node()
-        rclpy.try_shutdown()
 
 
 def test_a_goal_before_the_first_look_for_the_planner_waits_for_it(controller):
