@@ -103,7 +103,7 @@ class ArmEstimator:
         self._h[4:6, 0:2] = np.eye(2)
         self._h[4:6, 4:6] = -np.eye(2)
         self._kf = _ModelEKF(self._integrate)
-        self._q, self._q_dt_s = None, None
+        self._q_unit = None                 # (σ², filterpy's Q at dt = 1 s)
         self._f_at = self._f = None         # (supply, (joints, command, bus)), its A
         speed = F_KEPT_RAD_S if not any(j.coulomb_friction_nm for j in arm.joints) \
             else min(F_KEPT_RAD_S, 0.1 * COULOMB_SMOOTHING_RAD_S)
@@ -291,15 +291,18 @@ class ArmEstimator:
         kf.x, kf.P = x, _symmetric(p)
 
     def _process_noise(self, dt_s: float) -> np.ndarray:
-        """White acceleration σ held over the step, per joint; random-walk encoder zeros."""
-        if dt_s != self._q_dt_s:
-            q = np.zeros((6, 6))
-            q[:4, :4] = Q_discrete_white_noise(
-                dim=2, dt=dt_s, var=self.process_noise_rad_s2 ** 2, block_size=2,
-                order_by_dim=False)
-            q[4, 4] = q[5, 5] = ZERO_DRIFT_RAD_PER_SQRT_S ** 2 * dt_s
-            self._q, self._q_dt_s = q, dt_s     # the loop's period rarely changes: keep Q
-        return self._q
+        """White acceleration σ held over the step, per joint; random-walk encoder zeros.
+        Its Q(dt) = S Q(1) S, S = diag(dt², dt², dt, dt): filterpy's Q(1) once per σ, scaled
+        (a step's dt is rarely the one before: a reading's age varies)."""
+        variance = self.process_noise_rad_s2 ** 2
+        if self._q_unit is None or self._q_unit[0] != variance:
+            self._q_unit = (variance, Q_discrete_white_noise(
+                dim=2, dt=1.0, var=variance, block_size=2, order_by_dim=False))
+        scale = np.array([dt_s * dt_s, dt_s * dt_s, dt_s, dt_s])
+        q = np.zeros((6, 6))
+        q[:4, :4] = self._q_unit[1] * np.outer(scale, scale)
+        q[4, 4] = q[5, 5] = ZERO_DRIFT_RAD_PER_SQRT_S ** 2 * dt_s
+        return q
 
     def _integrate(self, x, u):
         """The EKF's mean prediction: RK4 substeps of f, clamped at the stops like the plant."""
@@ -324,8 +327,8 @@ class ArmEstimator:
             self._f_at, self._f = (supply, at), self._jacobian(f, joint, voltage)
         ah = self._f * step_s
         ah2 = ah @ ah
-        phi = np.eye(4) + ah + ah2 / 2.0 + ah2 @ (ah / 6.0 + ah2 / 24.0)
-        transition = np.eye(6)
+        phi = _EYE4 + ah + ah2 / 2.0 + ah2 @ (ah / 6.0 + ah2 / 24.0)
+        transition = _EYE6.copy()
         transition[:4, :4] = np.linalg.matrix_power(phi, substeps)
         return transition
 
@@ -358,6 +361,9 @@ class ArmEstimator:
     def _require_initialised(self) -> None:
         if not self._initialised:
             raise RuntimeError('ArmEstimator: call reset(potentiometer_rad, encoder_rad) first')
+
+
+_EYE4, _EYE6 = np.eye(4), np.eye(6)
 
 
 class _ModelEKF(ExtendedKalmanFilter):

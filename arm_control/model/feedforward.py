@@ -139,11 +139,11 @@ class PeriodFeedforward:
 
 def _at_rest(samples, limit: float, bus: float):
     """(q, limit, bus) when the setpoint samples all rest at one angle q; else None."""
-    q = samples[0][0]
+    q = (float(samples[0][0][0]), float(samples[0][0][1]))
     for q_k, qd_k, qdd_k in samples:
-        if np.any(q_k != q) or np.any(qd_k) or np.any(qdd_k):
+        if (q_k[0], q_k[1]) != q or qd_k[0] or qd_k[1] or qdd_k[0] or qdd_k[1]:
             return None
-    return float(q[0]), float(q[1]), limit, bus
+    return q[0], q[1], limit, bus
 
 
 def _same_rest(rest, holding) -> bool:

@@ -197,9 +197,9 @@ def listen(node, kind, topic: str, handler, qos, callback_group=None):
 
 class Drained(CallbackGroup):
     """Subscriptions no executor waits on or calls back: their messages stay in their readers
-    until the node takes them (``take_all``). For inputs read only beside another, that comes
-    right after them: each message would wake the executor, which gathers every entity of
-    the node on every wake."""
+    until the node takes them (``take_all``), in one thread of its choice. For inputs read at
+    a beat of the node's own (the controller's readings, at its loop's tick): each message
+    would wake the executor, which gathers every entity of the node on every wake."""
 
     def can_execute(self, entity) -> bool:
         return False

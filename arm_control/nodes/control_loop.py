@@ -83,7 +83,7 @@ class ControlLoop:
         """The clock runs. With simulated time it reads 0 until the first /clock: a reading
         or a tick stamped then, and the next an epoch later, once overflowed the filter's
         prediction, and the controller never left ``no_sensors`` (seen under load)."""
-        return self.clock.now().nanoseconds > 0
+        return self._clock_ns() > 0
 
     def next_command_s(self) -> float:
         """When the next command will act: now in real time (a poke ticks at once); in

@@ -1,8 +1,11 @@
 """The controller's readings: ``joint_states``, ``motor_encoders`` (JointState) and
 ``battery_state`` (bus volts and current, for the estimate and the feedforward).
 
-joint_states in the executor's thread as each arrives; the encoders and the bus as each
-joint_states is taken (a robot sends them first); the loop takes what came at its tick.
+All three are taken in the loop's thread, at its tick (and, in simulated time, while it
+waits for a step's reading): no executor waits on them (``Drained``), so the executor does
+not wake for each, and no thread takes from a subscription another waits on (rcl does not
+promise that: a controller doing so died of a corrupted heap). The encoders and the bus are
+taken as each joint_states is (a robot sends them first).
 """
 
 import math
@@ -29,11 +32,8 @@ class SensorInputs(NodePart):
         # The latest readings for the loop, and the encoders and bus: (value, received at).
         self.readings, self.encoders, self.bus = [], None, None
         self.reading_ages_s = []            # arrival minus stamp of each joint_states
-        # In the executor's thread, as each arrives: an rcl subscription is not to be taken
-        # from by one thread while another waits on it (a controller taking joint_states in
-        # its loop's thread died of a corrupted heap beside two busy loops).
         self.joint_states_sub = listen(node, JointState, 'joint_states', self.on_joint_states,
-                                       STATE_STREAM)
+                                       STATE_STREAM, Drained())
         self.beside = [(listen(node, kind, topic, handler, STATE_STREAM, Drained()), handler)
                        for topic, kind, handler in (
                            ('motor_encoders', JointState, self.on_encoders),
@@ -41,12 +41,19 @@ class SensorInputs(NodePart):
 
     def take_new(self) -> list:
         """In the loop's thread: the readings since the last call, oldest first."""
+        self.take_arrived()
         readings, self.readings = self.readings, []
         return readings
 
     def has_reading(self, now_s: float) -> bool:
         """The joint states of ``now_s`` (simulated time: the sim's step) are in."""
+        self.take_arrived()
         return any(taken >= now_s - 1e-6 for _, taken in self.readings)
+
+    @guarded
+    def take_arrived(self) -> None:
+        """In the loop's thread: the joint states waiting in the reader, oldest first."""
+        take_all(self.joint_states_sub, self.on_joint_states, received=True)
 
     @guarded
     def on_joint_states(self, msg: JointState, received_ns: int = 0) -> None:

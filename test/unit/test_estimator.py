@@ -235,3 +235,20 @@ def test_a_step_predicted_again_is_taken_from_the_first(arm, controller_config, 
     (kept_states, kept_computed), (all_states, all_computed) = runs
     np.testing.assert_allclose(kept_states, all_states, rtol=0.0, atol=1e-11)
     assert kept_computed < 0.75 * all_computed
+
+
+def test_the_noise_a_step_adds_is_white_acceleration_held_over_it(arm, process_noise_rad_s2):
+    """Over any step dt, white acceleration of variance σ² held over it adds σ²dt⁴/4 to each
+    angle's variance, σ²dt²  to each speed's and σ²dt³/2 between them, and nothing between
+    the joints: steps of the two lengths a period takes, in turn."""
+    estimator = ArmEstimator(arm, process_noise_rad_s2)
+    variance = process_noise_rad_s2 ** 2
+    for dt in (0.013, 0.007, 0.013, 0.02):
+        q = estimator._process_noise(dt)
+        for joint in (0, 1):
+            angle, speed = joint, joint + 2
+            assert q[angle, angle] == pytest.approx(variance * dt ** 4 / 4, rel=1e-12)
+            assert q[speed, speed] == pytest.approx(variance * dt ** 2, rel=1e-12)
+            assert q[angle, speed] == q[speed, angle] == pytest.approx(variance * dt ** 3 / 2,
+                                                                       rel=1e-12)
+        assert q[0, 1] == q[0, 3] == q[2, 3] == 0.0
