@@ -209,7 +209,9 @@ class PlannerNode(Node):
         if escape is not None:
             self.last_message += f'; the start is in forbidden space ({escape}), so the ' \
                 'path first takes the shortest way out'
-        self.get_logger().info(f'{self.last_message} ({1000 * self.last_latency_s:.1f} ms)')
+        # Each answer at debug (its last in /diagnostics): the controller asks for the paths
+        # between presets at start, and the goals' own lines are the controller's.
+        self.get_logger().debug(f'{self.last_message} ({1000 * self.last_latency_s:.1f} ms)')
         return response
 
     def plan(self, start_q, goal_xy):

@@ -263,6 +263,11 @@ class SimNode(Node):
             waiting = self.last_command_s > -math.inf and not self.commanded_this_period
             if waiting and wall_s - self.period_began_wall_s < LOCKSTEP_WAIT_S:
                 return                        # the controller has not answered this period
+            if waiting:
+                self.get_logger().warning(
+                    f'a period began without the command for the last: none for '
+                    f'{LOCKSTEP_WAIT_S:g} s of real time ({self.late_commands} late commands '
+                    'so far, each for an earlier reading)', throttle_duration_sec=5.0)
             if wall_s < self.period_due_wall_s - WALL_SLACK_S:
                 return                        # its wall time has not come
             # Periods keep to the wall's schedule (a whole period late: a new one), so that a

@@ -74,9 +74,8 @@ def test_the_nodes_follow_the_sims_clock_faster_than_real_time(launch, probe, ar
 def test_a_rogue_clock_mid_move_is_taken_out_and_the_arm_goes_on(launch, probe, arm, jump_s):
     """One /clock 100 s ahead (or 10 s back) from another node while the arm moves: the
     controller keeps commanding, and the goal is reached above the floor."""
-    launch('sim', '-p', 'sim_time_factor:=1.0')
-    for name in ('planner', 'controller'):
-        launch(name, '-p', 'use_sim_time:=true')
+    nodes = [launch('sim', '-p', 'sim_time_factor:=1.0')]
+    nodes += [launch(name, '-p', 'use_sim_time:=true') for name in ('planner', 'controller')]
     clock = []
     probe.node.create_subscription(Clock, '/clock', clock.append, 100)
     truth = probe.collect(JointState, '/sim/ground_truth')
@@ -109,5 +108,12 @@ def test_a_rogue_clock_mid_move_is_taken_out_and_the_arm_goes_on(launch, probe, 
     # The second publisher of /clock is named; its message, heard before the sim's next (a
     # race: the clock may be overridden again before the loop reads it), is a jump.
     assert 'untrusted' in kinds and 'sensors_lost' not in kinds
-    assert gaps_s.max() < 0.25
+    assert gaps_s.max() < 0.25, said_of_the_wait(nodes)
     assert np.min(ForbiddenSpace(arm).lowest_point_m(q)) >= 0.0
+
+
+def said_of_the_wait(nodes) -> str:
+    """The nodes' warnings: which side waited for the other (the sim for a command, the
+    controller's loop for its clock)."""
+    return '\n'.join(f'{node.name}: {line}' for node in nodes
+                     for line in node.output().splitlines() if '[WARN]' in line)
