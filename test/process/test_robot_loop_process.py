@@ -53,10 +53,19 @@ def test_on_the_robot_loop_a_hold_is_still_and_a_move_arrives(rig):
     began = rig.truth[-1][0]
     rig.send(1.1, 0.9)
     assert rig.wait_said('goal_reached', 10.0, began), rig.event_log(began)
-    assert rig.wait_held(rig.true_q(), 2.0 * DEG, timeout_s=3.0)
+    reached_q, reached_s = rig.true_q(), time.monotonic()
+    assert rig.wait_held(reached_q, 2.0 * DEG, timeout_s=3.0), drift(rig, reached_q, reached_s)
     tool = KINEMATICS.forward(rig.true_q())
     assert math.dist(tool, (1.1, 0.9)) < 0.03
     assert_never_forbidden(rig, began)
+
+
+def drift(rig, q, since_s: float) -> str:
+    """How far the true joints went from ``q`` after ``since_s``, and on how many states."""
+    moved = [np.max(np.abs(np.array(m.position) - q)) for m in rig.truth.messages(since_s)]
+    return (f'{len(moved)} true states after {q} rad; the farthest '
+            f'{math.degrees(max(moved, default=math.nan)):.2f} deg from it, the last '
+            f'{math.degrees(moved[-1]) if moved else math.nan:.2f} deg')
 
 
 @pytest.mark.parametrize('phase_s', [0.004, 0.016])
