@@ -4,8 +4,9 @@
 All three are taken in the loop's thread, at its tick (and, in simulated time, while it
 waits for a step's reading): no executor waits on them (``Drained``), so the executor does
 not wake for each, and no thread takes from a subscription another waits on (rcl does not
-promise that: a controller doing so died of a corrupted heap). The encoders and the bus are
-taken as each joint_states is (a robot sends them first).
+promise that: a controller doing so died of a corrupted heap). They are handled in the order
+they arrived: a robot sends the encoders and the bus first, and a joint_states goes with
+those that came before it.
 """
 
 import math
@@ -32,12 +33,14 @@ class SensorInputs(NodePart):
         # The latest readings for the loop, and the encoders and bus: (value, received at).
         self.readings, self.encoders, self.bus = [], None, None
         self.reading_ages_s = []            # arrival minus stamp of each joint_states
-        self.joint_states_sub = listen(node, JointState, 'joint_states', self.on_joint_states,
-                                       STATE_STREAM, Drained())
-        self.beside = [(listen(node, kind, topic, handler, STATE_STREAM, Drained()), handler)
+        # The encoders and the bus first: a robot sends them before its joint states, so at one
+        # instant of arrival they go with it.
+        self.inputs = [(listen(node, kind, topic, handler, STATE_STREAM, Drained()), handler)
                        for topic, kind, handler in (
                            ('motor_encoders', JointState, self.on_encoders),
-                           ('battery_state', BatteryState, self.on_battery))]
+                           ('battery_state', BatteryState, self.on_battery),
+                           ('joint_states', JointState, self.on_joint_states))]
+        self.joint_states_sub = self.inputs[-1][0]
 
     def take_new(self) -> list:
         """In the loop's thread: the readings since the last call, oldest first."""
@@ -52,13 +55,18 @@ class SensorInputs(NodePart):
 
     @guarded
     def take_arrived(self) -> None:
-        """In the loop's thread: the joint states waiting in the reader, oldest first."""
-        take_all(self.joint_states_sub, self.on_joint_states, received=True)
+        """In the loop's thread: what waits in the three readers, in the order it arrived, so
+        that each joint_states goes with the encoders and the bus that came before it (two
+        readings can wait for one tick)."""
+        arrived = []
+        for order, (subscription, handler) in enumerate(self.inputs):
+            take_all(subscription, lambda msg, received_ns, order=order, handler=handler:
+                     arrived.append((received_ns, order, handler, msg)), received=True)
+        for received_ns, _, handler, msg in sorted(arrived, key=lambda taken: taken[:2]):
+            handler(msg, received_ns)
 
     @guarded
     def on_joint_states(self, msg: JointState, received_ns: int = 0) -> None:
-        for subscription, handler in self.beside:
-            take_all(subscription, handler)
         if not self.node.loop.started():
             return                                  # the sim's clock is not there yet
         sensing = self.node.core.sensing
@@ -90,16 +98,17 @@ class SensorInputs(NodePart):
             tuple(position), tuple(velocity), tuple(encoder), stamp, bus, supply_current), taken)]
 
     @guarded
-    def on_encoders(self, msg: JointState) -> None:
+    def on_encoders(self, msg: JointState, received_ns: int = 0) -> None:
         position = messages.joint_pair(msg, 'position')
         if position is None or not messages.within(position, MAX_ANGLE_RAD):
             return self.node.warn_bad('ignored motor_encoders: expected finite positions '
                                       'of [shoulder, elbow] within two turns')
-        self.encoders = (position, self.node.now_s())
+        self.encoders = (position, self.node.loop.arrived_s(received_ns))
 
     @guarded
-    def on_battery(self, msg: BatteryState) -> None:
+    def on_battery(self, msg: BatteryState, received_ns: int = 0) -> None:
         if not 0.0 < msg.voltage <= 2.0 * self.node.arm.battery.nominal_voltage:   # NaN too
             return self.node.warn_bad(f'ignored battery_state: voltage {msg.voltage} V')
         # BatteryState's current is negative while discharging; NaN when not reported.
-        self.bus = ((float(msg.voltage), -float(msg.current)), self.node.now_s())
+        self.bus = ((float(msg.voltage), -float(msg.current)),
+                    self.node.loop.arrived_s(received_ns))
