@@ -17,7 +17,7 @@ import numpy as np
 
 from arm_control.control.controller import ArmController
 from arm_control.model.plant import ArmPlant
-from arm_control.plans.port import InProcessPlanning
+from arm_control.plans.port import HeldRequests, InProcessPlanning
 
 HOLD_BEFORE_S = 0.5
 TIMEOUT_S = 8.0
@@ -26,21 +26,22 @@ PHYSICS_MS = 1                    # the plant's step and the recording's
 
 
 class PlanHandOff:
-    """The core's requests (``take_plan_requests``) sent to ``InProcessPlanning``, whose
-    answers go to ``on_timed_plan`` after the CPU time they took (path + branch choice +
-    timing): by an extra control cycle (``at_next_tick`` False), or only at the next
-    regular tick (True)."""
+    """The core's requests, held as it hands them on (its ``Planning``: ``HeldRequests``),
+    sent after its step to ``InProcessPlanning``, whose answers go to ``on_timed_plan``
+    after the CPU time they took (path + branch choice + timing): by an extra control cycle
+    (``at_next_tick`` False), or only at the next regular tick (True)."""
 
     def __init__(self, core, planner, at_next_tick=False):
         self.core, self.at_next_tick = core, at_next_tick
         self.answers = []             # from the planning, not yet ready
         self.planning = InProcessPlanning(core, planner, self.answers.append)
+        self.held = core.planning = HeldRequests()
         self.waiting = []             # (ready at, timed plan)
         self.plan_cpu_s, self.plan_wall_s = [], []
         self.delivered_s = math.nan
 
     def after_step(self, now_s):
-        for request in self.core.take_plan_requests():
+        for request in self.held.take():
             cpu, wall = time.thread_time(), time.perf_counter()
             self.planning.send([request])
             cpu, wall = time.thread_time() - cpu, time.perf_counter() - wall

@@ -15,15 +15,15 @@ Each period the node (or a test, or a benchmark) calls ``step(now_s, reading)``;
    moves, returns it to where it was held, or lifts it clear of forbidden space
    (``recovery.Recovery``).
 
-``step`` returns a ``port.Step`` (the volts, the state, the events, the plan requests);
-``take_news`` gives the publisher what changed. Callers read those, not the core's parts.
+``step`` returns a ``port.Step`` (the volts, the state, the events, the plan requests it
+handed on); ``take_news`` gives the publisher what changed. Callers read those, not the
+core's parts.
 
-The core does not plan: starting a goal emits a ``PlanRequest`` and the answer comes back as
-a ``TimedPlan`` through ``on_timed_plan``, from one ``plans.port.Planning`` -- in-process
-(tests, benchmarks) or ``PlanLink`` (the node). A ``planning`` set on the core is handed
-the requests in the step that asks them; without one the caller takes them
-(``take_news``). No plan within ``planner_timeout_s``: the goal fails with the reason --
-never a blind move.
+The core does not plan: starting a goal makes a ``PlanRequest``, handed in the next step to
+the core's one ``plans.port.Planning`` (``PlanLink`` in the node, ``InProcessPlanning`` in
+tests and benchmarks, else ``HeldRequests``), and the answer comes back as a ``TimedPlan``
+through ``on_timed_plan``. No plan within ``planner_timeout_s``: the goal fails with the
+reason -- never a blind move.
 """
 
 from dataclasses import replace
@@ -45,7 +45,8 @@ from arm_control.control.state_machine import ArmState as S, StateMachine, STOPP
 from arm_control.control.stops import Stops
 from arm_control.control.tracking import Tracking
 from arm_control.model.kinematics import TwoLinkKinematics
-from arm_control.plans.messages import PlanRequest, TimedPlan
+from arm_control.plans.messages import TimedPlan
+from arm_control.plans.port import HeldRequests
 from arm_control.plans.timer import PlanTimer
 from arm_control.text import quote
 
@@ -56,7 +57,8 @@ class ArmController:
 
     def __init__(self, arm: ArmConfig, config: ControllerConfig, planning=None):
         self.arm, self.config = arm, config
-        self.planning = planning      # a ``plans.port.Planning``, or None: ``take_news``
+        self.planning = HeldRequests() if planning is None else planning
+        self.handed = ()              # the plan requests handed on in the last step
         self.period_s = config.period_s
         self.plan_timer = PlanTimer(arm, config)
         dynamics, self.forbidden = self.plan_timer.dynamics, self.plan_timer.forbidden
@@ -184,9 +186,10 @@ class ArmController:
 
     # ------------------------------------------------------------------ planning hand-off
 
-    def take_plan_requests(self) -> list[PlanRequest]:
-        """Requests for the node to send to the planner (each once)."""
-        return self.goals.take_requests()
+    @property
+    def requests_waiting(self) -> bool:
+        """Plan requests made since the last step, for the next to hand on."""
+        return bool(self.goals.plans.requests)
 
     def on_timed_plan(self, now_s: float, timed: TimedPlan) -> None:
         """Take a timed plan (``PlanTimer.time_plan``); stale answers are ignored."""
@@ -216,19 +219,21 @@ class ArmController:
         self.last_step = Step(self.voltage.copy(), self.state, self.unpowered, self.estimate,
                               tracking.setpoint, tracking.tracking_error_rad,
                               tracking.feedforward_v, tracking.feedback_v,
-                              self.events.since(said), self.goals.plans.requests,
+                              self.events.since(said), self.handed,
                               self.goals.queue.version, self.goals.goal_q)
         return self.last_step
 
     def _volts(self, now_s: float, reading, reading_time_s, earlier) -> np.ndarray:
         dt_s = self.period_s if self.last_step_s is None else max(now_s - self.last_step_s, 0.0)
         self.last_step_s = now_s
+        self.handed = ()
         for earlier_reading, earlier_s in earlier:
             self.sensing.update(now_s, earlier_reading, earlier_s, self.voltage)
         self.sensing.update(now_s, reading, reading_time_s, self.voltage)
         self._supervise(now_s)
-        if self.planning is not None and self.goals.plans.requests:
-            self.planning.send(self.goals.take_requests())
+        if self.goals.plans.requests:
+            self.handed = tuple(self.goals.take_requests())
+            self.planning.send(self.handed)
         self.events.flush(now_s)
         if self.unpowered:
             self.tracking.stop()
@@ -245,14 +250,14 @@ class ArmController:
 
     @property
     def news_waiting(self) -> bool:
-        """Events or plan requests not yet taken (``take_news``)."""
-        return self.events.waiting or bool(self.goals.plans.requests)
+        """Events not yet taken (``take_news``)."""
+        return self.events.waiting
 
     def take_news(self) -> News:
-        """Events since the last take, the state, the goals, and the plan requests to send
-        (each once): for the node to publish."""
+        """Events since the last take (each once), the state and the goals: for the node
+        to publish."""
         return News(tuple(self.events.take()), self.state, tuple(self.pending_goals()),
-                    self.goals.queue.version, tuple(self.take_plan_requests()))
+                    self.goals.queue.version)
 
     def _wait_for_a_late_arm(self, now_s: float) -> None:
         """Shift the planned motion in hand later when the arm is behind on it

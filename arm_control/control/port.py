@@ -1,7 +1,7 @@
 """What the core gives back: a ``Step`` each control period, ``News`` for whoever publishes.
 
 Callers read fields, never the core's parts: the volts to apply, the state, the estimate and
-setpoint, the events said and the plan requests waiting (``ArmController.step`` and
+setpoint, the events said and the plan requests handed on (``ArmController.step`` and
 ``ArmController.take_news``).
 """
 
@@ -29,7 +29,7 @@ class Step:
     feedforward_v: np.ndarray
     feedback_v: np.ndarray
     events: tuple[Event, ...]             # said during this step (still in the log to take)
-    plan_requests: tuple[PlanRequest, ...]    # waiting to be sent (``take_news`` takes them)
+    plan_requests: tuple[PlanRequest, ...]    # handed to the core's ``Planning`` in this step
     queue_version: int                    # changes whenever the goal queue does
     goal_q: Optional[np.ndarray]          # where the goal's motion ends, rad; None: no goal
 
@@ -37,10 +37,9 @@ class Step:
 @dataclass(frozen=True)
 class News:
     """What changed for people to hear, taken once: events, the state, the goal queue (the
-    current goal first), its version, and the plan requests to send."""
+    current goal first) and its version."""
 
     events: tuple[Event, ...]
     state: ArmState
     goals: tuple[Goal, ...]
     queue_version: int
-    plan_requests: tuple[PlanRequest, ...]

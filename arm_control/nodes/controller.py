@@ -71,8 +71,9 @@ class ControllerNode(Node):
         self.settings = controller_settings(params)         # as every change is checked
         self.arm, self.config = self.settings.arm, self.settings.config
         self.lock = threading.Lock()                # the core, between the threads
-        self.plans = PlanLink(self, self.arm, self.config, self.on_timed_plan)
-        self.core = ArmController(self.arm, self.config)
+        self.plans = PlanLink(self, self.arm, self.config, self.on_timed_plan,
+                              lambda: self.poll_planner(False))
+        self.core = ArmController(self.arm, self.config, self.plans)
         self.trajectories = TrajectoryServer(self, params)     # FollowJointTrajectory, topic
         self.trust, self.gate = TrustWatch(self.core), InputGate()
         self.claims = ClaimLink(self)                       # who keeps the arm
@@ -137,6 +138,8 @@ class ControllerNode(Node):
             powered = not self.core.unpowered
             result = call(self.core_now_s(), *args)
             self.gate.spent(time.perf_counter() - began)     # inputs' share of the core
+            if self.core.requests_waiting:
+                self.loop.poke()            # a goal is planned from the step it asks in
             if powered and self.core.unpowered and not self.loop.simulated() \
                     and not self.claims.yielding:
                 self.last_command = (0.0, 0.0)
@@ -255,17 +258,12 @@ class ControllerNode(Node):
     # ------------------------------------------------------------------ outputs
 
     def publish_outputs(self) -> None:
-        """In the executor: plan requests out first (the arm waits for them, and a log line
-        and messages sent before them delay every goal), then events, state and queue as
-        they changed."""
+        """In the executor: events, state and queue as they changed (the plan calls of the
+        same step went out before: ``PlanLink``)."""
         with self.lock:
             news = self.core.take_news()
         events, state, pending = news.events, news.state, news.goals
-        version, requests = news.queue_version, news.plan_requests
-        if requests:
-            self.plans.let_keeper_work(False)      # a goal to plan: not while it moves
-            self.plans.send(requests)
-            self.poll_planner(False)
+        version = news.queue_version
         for event in events:
             self.events_pub.publish(String(data=str(event)))
             log_at(self.get_logger(), event.level, str(event))

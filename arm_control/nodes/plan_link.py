@@ -1,9 +1,13 @@
 """The controller's way to a plan: the ``plan_path`` client and the worker that times.
 
-A request goes to the planner node as GetPlan (start = the tool pose to plan from, goal =
-the point); its answer, turned back into joint waypoints, goes to the worker process
-(``PlanWorker``) to be checked and timed; the TimedPlan comes back through ``on_timed``, in
-the worker's result thread. A broken or empty answer comes back at once, with the reason.
+The core hands its requests to ``send`` in its step (the control loop's thread, under the
+node's lock); they wait there for the executor, which calls the planner outside the lock:
+its guard condition is made before the node's others, so in one wake the calls go out
+before the events and the log lines of the same step. A request goes to the planner node as
+GetPlan (start = the tool pose to plan from, goal = the point); its answer, turned back into
+joint waypoints, goes to the worker process (``PlanWorker``) to be checked and timed; the
+TimedPlan comes back through ``on_timed``, in the worker's result thread. A broken or empty
+answer comes back at once, with the reason.
 
 Once the arm has had no goal for a while, the paths between presets are asked for too, one
 at a time, and handed to the worker's keeper alone (``keep_presets``): the first goal from a
@@ -12,6 +16,7 @@ preset to another then starts on its fine trajectory.
 
 from dataclasses import replace
 import math
+import threading
 import time
 
 from nav_msgs.srv import GetPlan
@@ -41,16 +46,19 @@ PRESET_CALLS = 3
 
 
 class PlanLink:
-    """One node's planner client and timing worker (the node's ``plans.port.Planning``:
-    ``send``, answers to ``on_timed``); made first thing at the node's start, so that
-    finding the planner and starting the worker go on while the rest is built."""
+    """One node's planner client and timing worker (the core's ``plans.port.Planning``:
+    ``send``, answers to ``on_timed``; ``on_sent`` after calls went out); made first thing
+    at the node's start, so that finding the planner and starting the worker go on while
+    the rest is built."""
 
-    def __init__(self, node, arm, config, on_timed):
+    def __init__(self, node, arm, config, on_timed, on_sent=lambda: None):
         self.node = node
         self.kinematics = TwoLinkKinematics(arm.shoulder.length_m, arm.elbow.length_m)
         self.forbidden = ForbiddenSpace(arm)          # its joint limits, to unwrap angles
         self.planner_timeout_s = config.planner_timeout_s
-        self.on_timed = on_timed
+        self.on_timed, self.on_sent = on_timed, on_sent
+        self.outbox, self.outbox_lock = [], threading.Lock()   # handed on, not yet called
+        self.sender = node.create_guard_condition(self._call_outbox)
         self.client = node.create_client(GetPlan, 'plan_path')
         self.worker = PlanWorker(arm, config, self._timed)
         self.calls = {}                      # unanswered call -> (sent at, request, sends)
@@ -87,14 +95,27 @@ class PlanLink:
         return bool(self.calls) or self.worker.busy
 
     def send(self, requests) -> None:
-        """Call for ``requests``; the open calls for older ones are forgotten (the core takes
-        the answer to its newest only), so none of them is sent again."""
+        """From any thread: ``requests`` to call for, in the executor."""
+        with self.outbox_lock:
+            self.outbox.extend(requests)
+        self.sender.trigger()
+
+    def _call_outbox(self) -> None:
+        """Call for the requests handed on; the open calls for older ones are forgotten (the
+        core takes the answer to its newest only), so none of them is sent again. The
+        keeper stops: a goal to plan, not while it moves."""
+        with self.outbox_lock:
+            requests, self.outbox = self.outbox, []
+        if not requests:
+            return
+        self.let_keeper_work(False)
         newest = {request.request_id for request in requests}
         for future, (_, request, _) in list(self.calls.items()):
             if request.request_id not in newest:
                 self._forget(future)
         for request in requests:
             self._call(request, 1)
+        self.on_sent()
 
     def let_keeper_work(self, working: bool) -> None:
         """Whether the worker's keeper may work now (said when it changes)."""

@@ -9,8 +9,10 @@ Whoever plans is a ``Planning``: ``send(requests)``, and each answer goes to the
 - ``nodes.plan_link.PlanLink`` (the controller node): the planner node plans, the worker
   process times; the answer comes back on the worker's result thread.
 
-A core given a ``Planning`` hands it its requests in the step that asks them; without one
-(the node, which sends outside its lock) the caller takes them (``take_news``) and sends.
+- ``HeldRequests``: keeps them for whoever takes them (``take``); a core made without a
+  ``Planning`` has one.
+
+The core hands its requests to its ``Planning`` in the step that asks them, whichever it is.
 """
 
 from typing import Callable, Optional, Protocol, Sequence
@@ -23,6 +25,20 @@ class Planning(Protocol):
 
     def send(self, requests: Sequence[PlanRequest]) -> None:
         ...
+
+
+class HeldRequests:
+    """Requests kept, not planned, until ``take`` takes them (each once)."""
+
+    def __init__(self):
+        self.requests = []
+
+    def send(self, requests: Sequence[PlanRequest]) -> None:
+        self.requests.extend(requests)
+
+    def take(self) -> list[PlanRequest]:
+        taken, self.requests = self.requests, []
+        return taken
 
 
 class InProcessPlanning:
@@ -43,7 +59,7 @@ class InProcessPlanning:
 
 
 def plan_in_process(core, planner):
-    """``core`` planning with ``planner`` in its own step (``InProcessPlanning``); None: the
-    core only emits requests. Returns the core."""
-    core.planning = None if planner is None else InProcessPlanning(core, planner)
+    """``core`` planning with ``planner`` in its own step (``InProcessPlanning``); None: its
+    requests held (``HeldRequests``). Returns the core."""
+    core.planning = HeldRequests() if planner is None else InProcessPlanning(core, planner)
     return core

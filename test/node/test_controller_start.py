@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import rclpy
 from rclpy.parameter import Parameter
@@ -23,7 +24,7 @@ def test_a_goal_before_the_first_look_for_the_planner_waits_for_it(controller):
     assert accepted
     assert controller.core.goals.waiting_for_planner
     assert [e.kind for e in controller.core.events.history].count(Kind.PLANNER_WAITING) == 1
-    assert controller.core.take_plan_requests() == []
+    assert not controller.core.requests_waiting and controller.plans.outbox == []
     assert os.sched_getscheduler(0) == os.SCHED_OTHER
 
 
@@ -38,23 +39,27 @@ def test_a_controller_that_yielded_refuses_settings_and_keeps_its_own(controller
     assert result.successful, result.reason
 
 
-def test_a_plan_request_goes_out_before_the_goal_s_events(controller):
-    """The arm waits for the plan, nobody waits for the events: the request is sent first,
-    then the events (each also a log line), state and queue."""
-    controller.publish_outputs()                # what the start said is out of the way
-    order = []
-    controller.core.events.say(0.0, Kind.GOAL_QUEUED, 'info', 'goal queued')
-    controller.core.take_plan_requests = lambda: ['a request']
-    controller.plans.send = lambda requests: order.append(('request', tuple(requests)))
+def test_a_step_s_plan_call_goes_out_before_its_events(controller):
+    """The arm waits for the plan, nobody waits for the events: handed on in the same step,
+    the planner call goes out before the events (each also a log line), state and queue."""
+    import rclpy
+    for _ in range(5):                          # what the start said is out of the way
+        rclpy.spin_once(controller, timeout_sec=0.05)
+    order, request = [], SimpleNamespace(request_id=7)
+    controller.plans._call = lambda request, sends: order.append(('request', request))
     publish = controller.events_pub.publish
 
     def publish_event(message):
         order.append(('event', message.data))
         publish(message)
     controller.events_pub.publish = publish_event
-    controller.publish_outputs()
-    assert [kind for kind, _ in order] == ['request', 'event']
-    assert order[0][1] == ('a request',)
+    with controller.lock:                       # as the core's step does, in that order
+        controller.core.events.say(0.0, Kind.GOAL_QUEUED, 'info', 'goal queued')
+        controller.plans.send([request])
+        controller.outputs.trigger()
+    for _ in range(4):
+        rclpy.spin_once(controller, timeout_sec=0.05)
+    assert order[:2] == [('request', request), ('event', 'goal_queued: goal queued')]
 
 
 START_IN_A_FRESH_PROCESS = '''

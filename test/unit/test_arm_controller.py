@@ -196,8 +196,8 @@ def test_asynchronous_planning_round_trip(arm, controller_config, planner):
     rig.core.submit_preset(rig.now, 'high_score')
     rig.step()
     assert rig.core.state == ArmState.PLANNING
-    (request,) = rig.core.take_plan_requests()
-    assert rig.core.take_plan_requests() == []
+    (request,) = rig.core.planning.take()
+    assert rig.core.planning.take() == []
     assert request.start_q == pytest.approx(START, abs=0.02)
     rig.run(0.3)                                         # the planner takes its time
     timed = rig.core.plan_timer.time_plan(request, planner.plan(request.start_q,
@@ -208,10 +208,11 @@ def test_asynchronous_planning_round_trip(arm, controller_config, planner):
     assert rig.run(5.0, rig.in_state(ArmState.HOLDING))
 
 
-def test_a_step_is_one_value_with_its_events_and_the_plan_requests_waiting(
+def test_a_step_is_one_value_with_its_events_and_the_plan_requests_it_handed_on(
         arm, controller_config):
     """``step`` returns the volts with what they came from: the events said in that step
-    (no other), the plan requests waiting until ``take_news`` takes them, once."""
+    (no other), the plan requests it handed to the core's planning (once); ``take_news``
+    gives the events since the last take."""
     core = ArmController(arm, controller_config)
     first = core.step(0.0, reading_at(START))
     assert [e.kind for e in first.events] == [Kind.SENSORS_BACK] and not first.plan_requests
@@ -221,8 +222,9 @@ def test_a_step_is_one_value_with_its_events_and_the_plan_requests_waiting(
     assert planning.state == ArmState.PLANNING and planning.events == ()
     (request,) = planning.plan_requests
     assert planning.queue_version != first.queue_version
+    assert core.planning.take() == [request]
     news = core.take_news()
-    assert news.plan_requests == (request,) and len(news.goals) == 1
+    assert len(news.goals) == 1
     assert [e.kind for e in news.events] == [Kind.SENSORS_BACK, Kind.GOAL_QUEUED]
     assert core.step(0.04, reading_at(START)).plan_requests == ()
     steps = [core.step(0.02 * k, None) for k in range(3, 40)]
@@ -233,16 +235,20 @@ def test_a_step_is_one_value_with_its_events_and_the_plan_requests_waiting(
 
 def test_a_goal_for_an_idle_arm_is_asked_for_at_once_and_the_next_waits_its_turn(
         arm, controller_config):
-    """Queued at an idle arm, a goal's plan is asked for when it comes, not at the next
-    period; a goal queued behind it waits until the arm has reached the first."""
+    """Queued at an idle arm, a goal's plan is asked for when it comes (stamped then, handed
+    on in the next step: in the node a goal ticks the loop at once); a goal queued behind
+    it waits until the arm has reached the first."""
     rig = Rig(arm, controller_config, planner=None)
     rig.step()
-    rig.core.submit_goal(rig.now, 1.1, 0.9)
-    assert rig.core.state == ArmState.PLANNING
-    (request,) = rig.core.take_plan_requests()
-    assert request.goal.xy == pytest.approx((1.1, 0.9))
+    asked_s = rig.now
+    rig.core.submit_goal(asked_s, 1.1, 0.9)
+    assert rig.core.state == ArmState.PLANNING and rig.core.requests_waiting
+    rig.step()                                  # handed on in the next step
+    (request,) = rig.core.planning.take()
+    assert request.goal.xy == pytest.approx((1.1, 0.9)) and request.sent_time_s == asked_s
     rig.core.submit_goal(rig.now, 0.9, 1.5)
-    assert rig.core.take_plan_requests() == []
+    rig.step()
+    assert rig.core.planning.take() == []
     assert [g.xy for g in rig.core.pending_goals()][-1] == pytest.approx((0.9, 1.5))
 
 
@@ -292,7 +298,7 @@ def test_a_late_answer_to_a_cancelled_request_is_ignored(arm, controller_config,
     rig.step()
     rig.core.submit_preset(rig.now, 'back_score')
     rig.step()
-    (request,) = rig.core.take_plan_requests()
+    (request,) = rig.core.planning.take()
     rig.core.cancel(rig.now)
     rig.core.on_timed_plan(rig.now, rig.core.plan_timer.time_plan(
         request, planner.plan(request.start_q, request.goal.xy)))
@@ -311,7 +317,7 @@ def test_a_bad_plan_is_refused(arm, controller_config, waypoints):
     x, y = TwoLinkKinematics(1.0, 0.8).forward((0.6, -0.8))
     rig.core.submit_goal(rig.now, x, y)
     rig.step()
-    (request,) = rig.core.take_plan_requests()
+    (request,) = rig.core.planning.take()
     bad = dataclasses.make_dataclass('P', ['ok', 'reason', 'waypoints_rad'])(
         True, '', np.array(waypoints))
     rig.core.on_timed_plan(rig.now, rig.core.plan_timer.time_plan(request, bad))

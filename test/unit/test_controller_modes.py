@@ -105,7 +105,7 @@ def take(trigger, rig, planner):
             core.submit_goal(rig.now, 1.0, 1.0)
         rig.run(1.0, lambda: core.state != state)
     elif trigger == Trigger.PLAN_READY:
-        (request,) = core.take_plan_requests()
+        (request,) = core.planning.take()
         core.on_timed_plan(rig.now, core.plan_timer.time_plan(
             request, planner.plan(request.start_q, request.goal.xy)))
     elif trigger == Trigger.PLAN_FAILED:

@@ -1,5 +1,6 @@
-"""One planning path: the core emits plan requests to a ``Planning`` and takes its timed
-plans; in-process, the answer is taken in the step that asks, at that step's instant."""
+"""One planning path: the core hands its plan requests to its ``Planning`` in the step that
+asks and takes its timed plans; in-process, the answer is taken in that step, at its
+instant."""
 
 import pytest
 
@@ -33,15 +34,19 @@ def test_a_core_hands_each_request_to_its_planning_in_the_step_that_asks(
     planning = loop.core.planning = Recording()
     core = started_goal(loop)
     assert [request.goal.xy for request in planning.sent] == [pytest.approx(GOAL_XY)]
-    assert core.last_step.plan_requests == ()
-    assert core.take_news().plan_requests == ()        # handed over, not left to send
+    assert core.last_step.plan_requests == tuple(planning.sent)
+    assert not core.requests_waiting                   # handed over, once
+    loop.step()
+    assert core.last_step.plan_requests == () and len(planning.sent) == 1
     assert core.state == ArmState.PLANNING             # no answer yet
 
 
-def test_without_a_planning_the_requests_are_left_for_the_caller(arm, controller_config):
+def test_without_a_planning_the_requests_are_held_for_whoever_takes_them(
+        arm, controller_config):
     core = started_goal(ClosedLoop(arm, controller_config))
-    requests = core.take_news().plan_requests
+    requests = core.planning.take()
     assert [request.goal.xy for request in requests] == [pytest.approx(GOAL_XY)]
+    assert core.planning.take() == []
     assert core.state == ArmState.PLANNING
 
 
@@ -53,4 +58,4 @@ def test_in_process_planning_answers_in_the_step_that_asks_at_its_instant(
     assert answered is not None and answered.ok
     assert answered.request.sent_time_s == core.last_step_s
     assert core.state == ArmState.TRACKING
-    assert core.last_step.plan_requests == ()
+    assert core.last_step.plan_requests == (answered.request,)

@@ -207,7 +207,7 @@ def started_goal(arm, planner, preset='back_score'):
     loop.step()
     loop.core.submit_preset(loop.now, preset)
     loop.step()
-    (request,) = loop.core.take_plan_requests()
+    (request,) = loop.core.planning.take()
     timer = loop.core.plan_timer
     plan = timer.ranking.plan(planner, request.start_q, request.goal.xy)
     quick = timer.time_plan(request, plan, quick=True)
