@@ -60,6 +60,7 @@ class ControllerConfig:
     """The controller's loop, tolerances, limits, gains and safety rules."""
 
     loop_rate_hz: float
+    holding_rate_hz: float          # the loop's rate while the arm holds still
     realtime_priority: int          # SCHED_FIFO priority of the loop's thread; 0: normal
     planning_priority: int          # SCHED_FIFO priority of a goal's quick timing; 0: normal
     goal_tolerance_rad: float
@@ -89,6 +90,11 @@ class ControllerConfig:
     def period_s(self) -> float:
         return 1.0 / self.loop_rate_hz
 
+    @property
+    def holding_periods(self) -> int:
+        """Periods from one tick to the next while the arm holds still."""
+        return round(self.loop_rate_hz / self.holding_rate_hz)
+
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> 'ControllerConfig':
         read = Reader(params)
@@ -111,8 +117,17 @@ class ControllerConfig:
                 raise ParameterError(f"parameter '{name}' = {list(triple)}: gains must be >= 0")
             return triple
 
+        loop_rate_hz = read.number('loop_rate_hz', low=0.0, high=1000.0, low_open=True)
+        holding_rate_hz = read.number('holding_rate_hz', low=0.0, high=loop_rate_hz,
+                                      low_open=True)
+        periods = loop_rate_hz / holding_rate_hz
+        if abs(periods - round(periods)) > 1e-6 * periods:
+            raise ParameterError(f"parameter 'holding_rate_hz' = {holding_rate_hz:g}: "
+                                 f'loop_rate_hz ({loop_rate_hz:g}) must be a whole number of '
+                                 f'times it (e.g. {loop_rate_hz / 2:g})')
         return cls(
-            loop_rate_hz=read.number('loop_rate_hz', low=0.0, high=1000.0, low_open=True),
+            loop_rate_hz=loop_rate_hz,
+            holding_rate_hz=holding_rate_hz,
             realtime_priority=read.integer('realtime_priority', low=0, high=98),
             planning_priority=read.integer('planning_priority', low=0, high=98),
             goal_tolerance_rad=read.positive('goal_tolerance_rad'),

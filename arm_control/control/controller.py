@@ -328,6 +328,21 @@ class ArmController:
 
     # ------------------------------------------------------------------ outputs
 
+    @property
+    def holding_still(self) -> bool:
+        """Holding with nothing to do (no goal, no plan request), the joints as settled as
+        at a goal: within ``goal_tolerance_rad`` of the setpoint, slower than
+        ``settled_velocity_rad_s``, and the feedforward keeping its voltage (its reference
+        is driven by one voltage over however long the loop waits: at rest, once settled,
+        the next period's) -- the loop may tick at ``holding_rate_hz``."""
+        estimate = self.estimate
+        if self.state != S.HOLDING or estimate is None or self.requests_waiting or \
+                self.goals.queue.pending() or not self.tracking.holding:
+            return False
+        tolerance, settled = self.config.goal_tolerance_rad, self.config.settled_velocity_rad_s
+        return all(abs(e) <= tolerance for e in self.tracking.tracking_error_rad) and \
+            all(abs(w) <= settled for w in estimate[2:])
+
     def pending_goals(self):
         """The current goal (first) and the queued ones, in the order they will be visited."""
         return self.goals.queue.pending()

@@ -9,7 +9,9 @@ integrates), RK4 on substeps of at most ``MAX_SUBSTEP_S``, and stable (``substep
 joints clamped at their hard stops as the plant does. Covariance P⁺ = F P Fᵀ + Q: F is the
 RK4 substeps' map of the linearised ẋ = A x, A = ∂f/∂x by finite differences at the start
 of the step; Q is piecewise-constant white acceleration of σ = ``process_noise_rad_s2`` per
-joint plus a slow random walk of the encoder zeros.
+joint plus a slow random walk of the encoder zeros. While a step stays where A holds (the
+F_KEPT bounds: a held or slowly moving arm), the mean takes the same RK4 substeps on the
+linearisation ẋ = f(x₀) + A (x − x₀): one model call, not four a substep.
 
 Update, z = [potentiometers, reported velocities, encoders], each measurement linear in x:
 
@@ -105,6 +107,7 @@ class ArmEstimator:
         self._kf = _ModelEKF(self._integrate)
         self._q_unit = None                 # (σ², filterpy's Q at dt = 1 s)
         self._f_at = self._f = None         # (supply, (joints, command, bus)), its A
+        self._maps = None                   # ((A, step, substeps), (F, Φ, Γ)) of the last
         speed = F_KEPT_RAD_S if not any(j.coulomb_friction_nm for j in arm.joints) \
             else min(F_KEPT_RAD_S, 0.1 * COULOMB_SMOOTHING_RAD_S)
         self._f_kept = (F_KEPT_RAD,) * 2 + (speed,) * 2 + (F_KEPT_V,) * 3
@@ -118,8 +121,8 @@ class ArmEstimator:
 
     def reset(self, potentiometer_rad, encoder_rad) -> None:
         """(Re)initialise from one reading with the arm at rest: θ = pot, ω = 0, z = pot − enc."""
-        pot = _finite_pair(potentiometer_rad, 'potentiometer_rad')
-        enc = _finite_pair(encoder_rad, 'encoder_rad')
+        pot = np.array(_finite_pair(potentiometer_rad, 'potentiometer_rad'))
+        enc = np.array(_finite_pair(encoder_rad, 'encoder_rad'))
         self._initialise(pot, np.zeros(2), self._vel_var, enc)
 
     def predict(self, voltage, dt_s: float, supply=None, bus_voltage: float = math.nan) -> None:
@@ -128,9 +131,8 @@ class ArmEstimator:
         current limits, capped at the bus) at each substep's speed, else ``voltage`` itself
         within the battery's nominal volts."""
         self._require_initialised()
-        u = _finite_pair(voltage, 'voltage')
         limit = self.arm.battery.nominal_voltage
-        u = np.clip(u, -limit, limit)
+        u_pair = _finite_pair(voltage, 'voltage', limit)
         if not (math.isfinite(dt_s) and dt_s >= 0.0):
             raise ValueError(f'dt_s must be finite and non-negative, got {dt_s}')
         if dt_s == 0.0:
@@ -141,34 +143,33 @@ class ArmEstimator:
             """f(x, u) with u what the motor controllers apply for the command."""
             applied = command if supply is None else supply.applied_at(command, x[2:], bus)
             return self.dynamics.derivative(x, applied)
-        joint = [float(v) for v in self._kf.x[:4]]
-        u_pair = (float(u[0]), float(u[1]))
         asked = (u_pair, float(dt_s), float(bus), supply)
         if self._predicted(asked):
             return
-        x_before, p_before = self._kf.x.copy(), self._kf.P.copy()
+        kf = self._kf
+        before = (kf.x.copy(), kf.P.copy())
+        joint = kf.x[:4].tolist()
         substeps = max(1, math.ceil(dt_s / self.substep_s - 1e-9))
         step_s = dt_s / substeps
-        self._kf.F = self._transition(derivative, joint, u_pair, bus, supply, step_s,
-                                      substeps)
-        self._kf.Q = self._process_noise(dt_s)
+        kf.F = self._transition(derivative, joint, u_pair, bus, supply, step_s, substeps)
+        kf.Q = self._process_noise(dt_s)
         # x by the model, P = F P Fᵀ + Q
-        self._kf.predict(u=(derivative, u_pair, step_s, substeps))
-        self._kf.P = _symmetric(self._kf.P)
-        self._predictions.append((asked, x_before, p_before, self._kf.x.copy(),
-                                  self._kf.P.copy()))
+        kf.predict(u=(derivative, joint, u_pair, step_s, substeps))
+        kf.P = _symmetric(kf.P)
+        self._predictions.append((asked, _key(*before), (kf.x.copy(), kf.P.copy())))
 
     def _predicted(self, asked) -> bool:
         """The filter put where a kept prediction took it, when that one began where the
         filter is, bit for bit, with the same command, bus and supply, over the same step
         (within SAME_STEP_S): the same numbers, not computed again."""
-        kf = self._kf
-        for before, x_before, p_before, x_after, p_after in reversed(self._predictions):
+        kf, here = self._kf, None
+        for before, key, (x_after, p_after) in reversed(self._predictions):
             if before[0] == asked[0] and abs(before[1] - asked[1]) <= SAME_STEP_S and \
-                    before[2] == asked[2] and before[3] is asked[3] and \
-                    np.array_equal(x_before, kf.x) and np.array_equal(p_before, kf.P):
-                kf.x, kf.P = x_after.copy(), p_after.copy()
-                return True
+                    before[2] == asked[2] and before[3] is asked[3]:
+                here = here or _key(kf.x, kf.P)
+                if key == here:
+                    kf.x, kf.P = x_after.copy(), p_after.copy()
+                    return True
         return False
 
     def update(self, potentiometer_rad, velocity_rad_s, encoder_rad) -> None:
@@ -305,12 +306,34 @@ class ArmEstimator:
         return q
 
     def _integrate(self, x, u):
-        """The EKF's mean prediction: RK4 substeps of f, clamped at the stops like the plant."""
-        derivative, voltage, step_s, substeps = u
-        state = [float(v) for v in x[:4]]
-        for _ in range(substeps):
-            state = self._hard_stops(rk4(derivative, state, voltage, step_s))
+        """The EKF's mean prediction: RK4 substeps of f, clamped at the stops like the plant;
+        on the linearisation while the step stays within A's bounds (``_linear``)."""
+        derivative, joint, voltage, step_s, substeps = u
+        state = self._linear(derivative, joint, voltage, substeps)
+        if state is None:
+            state = [float(v) for v in x[:4]]
+            for _ in range(substeps):
+                state = self._hard_stops(rk4(derivative, state, voltage, step_s))
         return np.concatenate([state, x[_ZERO]])
+
+    def _linear(self, f, joint, voltage, substeps):
+        """RK4's substeps on ẋ = f(x₀) + A (x − x₀) from x₀ = ``joint``: x − x₀ = Σₖ Φᵏ Γ f(x₀)
+        over k < n, Φ and Γ a substep's (``_transition``); None where the step ends beyond
+        A's bounds or past a stop."""
+        _, phi, gamma = self._maps[1]
+        step = gamma @ np.array(f(joint, voltage))
+        moved = step
+        for _ in range(substeps - 1):
+            moved = phi @ moved + step
+        end = [a + b for a, b in zip(joint, moved.tolist())]
+        at = self._f_at[1]
+        for i in range(4):
+            if abs(end[i] - at[i]) > self._f_kept[i]:
+                return None
+        for i in range(2):
+            if not self._lower[i] <= end[i] <= self._upper[i]:
+                return None
+        return end
 
     def _transition(self, f, joint, voltage, bus, supply, step_s, substeps) -> np.ndarray:
         """The 6×6 F of RK4 substeps from ``joint`` [θa, θb, ωa, ωb] under ``voltage``.
@@ -319,17 +342,26 @@ class ArmEstimator:
         the joints, the command and the bus stay within the F_KEPT_* bounds of where it was
         taken (same supply). One substep of ẋ ≈ A x maps by Φ = I + Ah + (Ah)²/2 + (Ah)³/6 +
         (Ah)⁴/24 (RK4 on a linear system), so F = Φⁿ; plain numpy, cheaper and steadier
-        under load than scipy's expm.
+        under load than scipy's expm. Γ = h (I + Ah/2 + (Ah)²/6 + (Ah)³/24) is what a
+        substep adds of a constant ẋ. The same A over the same substeps (within
+        SAME_STEP_S) gives the same maps.
         """
         at = (*joint, *voltage, bus)
         if self._f_at is None or self._f_at[0] is not supply or any(
                 abs(a - b) > bound for a, b, bound in zip(at, self._f_at[1], self._f_kept)):
             self._f_at, self._f = (supply, at), self._jacobian(f, joint, voltage)
+        if self._maps is not None:
+            (a, kept_step_s, kept_substeps), maps = self._maps
+            if a is self._f and kept_substeps == substeps and \
+                    abs(kept_step_s - step_s) * substeps <= SAME_STEP_S:
+                return maps[0]
         ah = self._f * step_s
         ah2 = ah @ ah
-        phi = _EYE4 + ah + ah2 / 2.0 + ah2 @ (ah / 6.0 + ah2 / 24.0)
+        gamma = step_s * (_EYE4 + ah / 2.0 + ah2 @ (_EYE4 / 6.0 + ah / 24.0))
+        phi = _EYE4 + ah @ (gamma / step_s)
         transition = _EYE6.copy()
         transition[:4, :4] = np.linalg.matrix_power(phi, substeps)
+        self._maps = (self._f, step_s, substeps), (transition, phi, gamma)
         return transition
 
     @staticmethod
@@ -377,11 +409,17 @@ class _ModelEKF(ExtendedKalmanFilter):
         self.x = self._integrate(self.x, u)
 
 
-def _finite_pair(values, name: str) -> np.ndarray:
+def _finite_pair(values, name: str, limit: float = math.inf):
+    """Two finite numbers, as floats within ±``limit``."""
     pair = np.asarray(values, float).reshape(-1)
     if pair.shape != (2,) or not np.all(np.isfinite(pair)):
         raise ValueError(f'{name} must be two finite numbers, got {list(np.ravel(values))}')
-    return pair
+    return tuple(min(max(float(v), -limit), limit) for v in pair)
+
+
+def _key(x: np.ndarray, p: np.ndarray) -> bytes:
+    """The filter's state and covariance, bit for bit."""
+    return x.tobytes() + p.tobytes()
 
 
 def _symmetric(p: np.ndarray) -> np.ndarray:

@@ -57,6 +57,12 @@ class Tracking:
         self.feedforward_v, self.feedback_v = feedforward, feedback
         return np.clip(total, -bus, bus)
 
+    @property
+    def holding(self) -> bool:
+        """The feedforward keeps its voltage: the setpoint at rest, held by the same answer
+        each period (``PeriodFeedforward``)."""
+        return self.feedforward.holding is not None
+
     def stop(self) -> None:
         """At 0 V: no error to track."""
         self.tracking_error_rad = np.zeros(2)

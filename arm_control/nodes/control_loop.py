@@ -3,7 +3,8 @@ own at real-time priority where allowed, so that no callback, burst of messages,
 or busy process delays a command. A plan that becomes ready wakes it at once (``poke``): the
 motion starts then, not at the next period, and the periods run on from there. In real time
 ``align(due_s)`` moves each next tick (the node's: to just after the robot loop's instants,
-``Commander.tick_due``).
+``Commander.tick_due``), and ``periods()`` says how many periods on it is due (the node's:
+``holding_periods`` while the arm holds still, else one).
 
 In simulated time the sim steps once per command, so a tick is an answer to one step: it
 waits (up to ``SIM_INPUT_WAIT_S`` of wall time) until ``has_input(now)`` says the step's
@@ -45,9 +46,11 @@ class ControlLoop:
     ``priority_problem`` says why the thread could not run at ``realtime_priority``."""
 
     def __init__(self, clock, period_s: float, tick, realtime_priority: int = 0, warn=print,
-                 has_input=lambda now_s: True, working=lambda: False, align=lambda due_s: due_s):
+                 has_input=lambda now_s: True, working=lambda: False, align=lambda due_s: due_s,
+                 periods=lambda: 1):
         self.clock, self.period_s, self.tick = clock, period_s, tick
         self.has_input, self.working, self.align = has_input, working, align
+        self.periods = periods
         self.realtime_priority, self.warn = realtime_priority, warn
         self.priority_problem = None
         self.last_tick_s = None             # the clock's time at the last tick
@@ -158,7 +161,7 @@ class ControlLoop:
                 late = poked or now > due_s + self.period_s or self.simulated()
                 due_s = (now if late else due_s) + self.period_s
                 if not self.simulated():
-                    due_s = self.align(due_s)
+                    due_s = self.align(due_s + (self.periods() - 1) * self.period_s)
                 continue
             wait_s = due_s - now
             if self.simulated():

@@ -97,9 +97,11 @@ class ControllerNode(Node):
         self.planner_timer = self.create_timer(PLANNER_POLL_S, self.watch_planner)
         self.watch = ControllerWatch(self)      # /diagnostics, who else is on the graph
         priority = self.config.realtime_priority
+        self.holding_still = False                  # at the last tick
         self.loop = ControlLoop(self.get_clock(), self.config.period_s, self.tick, priority,
                                 self.get_logger().warning, self.sensors.has_reading,
-                                self.plans.busy, self.commander.tick_due)
+                                self.plans.busy, self.commander.tick_due,
+                                lambda: self.config.holding_periods if self.holding_still else 1)
         # Not looked for yet: a goal that comes before the first look waits in the queue too.
         self.planner_ready = False
         self.command(self.core.on_planner_available, False)
@@ -219,6 +221,7 @@ class ControllerNode(Node):
                                 cut_power=True)
                 step = None
             voltage = np.zeros(2) if step is None else step.volts
+            self.holding_still = step is not None and self.core.holding_still
             self.trust.step(acts_s, self.loop.guard.take())
             last = self.core.last_step              # this period's, or before an error
             estimate = self.core.estimate

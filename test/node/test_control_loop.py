@@ -158,3 +158,44 @@ def test_a_reading_taken_late_is_timed_at_its_arrival_in_real_time_only():
     assert loop.arrived_s(0) == now
     simulated = ControlLoop(SimClock(100.0), PERIOD_S, lambda: None)
     assert simulated.arrived_s(round(99.985e9)) == simulated.now_s()
+
+
+class WallClock:
+    """The system clock, as a node's without simulated time."""
+
+    clock_type = ClockType.SYSTEM_TIME
+    ros_time_is_active = False
+
+    def now(self):
+        return SimpleNamespace(nanoseconds=time.time_ns())
+
+
+def test_holding_still_the_loop_ticks_every_few_periods_and_at_once_when_poked():
+    """In real time, ``periods()`` periods between ticks (2 while the arm holds still), one
+    otherwise; a poke (a goal) ticks at once, not at the next due tick. Late ticks only
+    make the gaps longer: the bounds hold on a loaded machine."""
+    ticks, still = [], [True]
+    loop = ControlLoop(WallClock(), PERIOD_S, lambda: ticks.append(time.monotonic()),
+                       periods=lambda: 2 if still[0] else 1)
+    loop.start()
+    try:
+        time.sleep(0.6)
+        held = np.diff(ticks)
+        count = len(ticks)
+        while len(ticks) == count:                  # just after a tick, poke
+            time.sleep(0.0005)
+        poked_s = time.monotonic()
+        loop.poke()
+        while len(ticks) == count + 1:
+            time.sleep(0.0005)
+        answered_s = ticks[count + 1] - poked_s
+        still[0] = False
+        time.sleep(0.1)
+        moving_from = len(ticks)
+        time.sleep(0.4)
+        moving = np.diff(ticks[moving_from:])
+    finally:
+        loop.stop()
+    assert len(held) >= 8 and np.percentile(held, 10) >= 1.5 * PERIOD_S, held
+    assert answered_s < PERIOD_S, answered_s
+    assert len(moving) >= 10 and np.median(moving) < 1.5 * PERIOD_S, moving

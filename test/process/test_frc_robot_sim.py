@@ -217,7 +217,23 @@ def test_the_executable_serves_and_stops_on_ctrl_c():
 
 def test_a_command_is_not_queued_behind_drawing():
     """The bridge's tables with a backlog of drawing set just before a command: the command
-    reaches the robot first, flushed, and the drawing follows on its own connection."""
+    reaches the robot first, flushed, and the drawing follows on its own connection. On one
+    connection the command could never come first (it would follow the backlog, in order);
+    on two, a loaded machine can run the drawing's periodic flush first: three tries."""
+    tries = []
+    for _ in range(3):
+        arrivals, separate = command_after_drawing()
+        assert separate                             # drawing never rides a command's flush
+        assert nt.COMMAND.name in arrivals and len(arrivals) > 1, arrivals
+        tries.append(arrivals[:5])
+        if arrivals[0] == nt.COMMAND.name:
+            return
+    pytest.fail(f'the drawing came first in every try: {tries}')
+
+
+def command_after_drawing():
+    """Topics as the robot's server heard them after 200 drawing updates and then a command
+    (for 1 s), and whether the drawing had a connection of its own."""
     from arm_control.frc.mechanism import Mechanism2dPublisher
     arm = config.load('sim')[0]
     server = RobotTables(ntcore.NetworkTableInstance.create(), free_port())
@@ -246,6 +262,4 @@ def test_a_command_is_not_queued_behind_drawing():
     finally:
         tables.close()
         server.close()
-    assert nt.COMMAND.name in arrivals and len(arrivals) > 1, arrivals
-    assert arrivals[0] == nt.COMMAND.name, arrivals[:5]
-    assert tables.drawing is not tables.instance      # drawing never rides a command's flush
+    return arrivals, tables.drawing is not tables.instance

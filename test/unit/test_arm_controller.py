@@ -61,6 +61,26 @@ def test_holds_the_goal_after_arriving(arm, controller_config, planner):
     assert rig.core.state == ArmState.HOLDING
 
 
+def test_only_an_arm_held_settled_with_nothing_to_do_holds_still(arm, controller_config,
+                                                                 planner):
+    """Holding still (the loop may tick at ``holding_rate_hz``): held, settled as at a goal,
+    no goal waiting; not on the way, nor once a goal or a push comes."""
+    rig = Rig(arm, controller_config, planner, seed=4)
+    rig.core.submit_preset(rig.now, 'mid_score')
+    assert not rig.core.holding_still
+    assert rig.run(1.0, rig.in_state(ArmState.TRACKING)) and not rig.core.holding_still
+    assert rig.run(5.0, rig.in_state(ArmState.HOLDING))
+    rig.run(0.5)
+    assert rig.core.holding_still
+    rig.plant.state[2] += 0.5                           # a push: 0.5 rad/s at the shoulder
+    rig.step()
+    assert rig.core.state == ArmState.HOLDING and not rig.core.holding_still
+    rig.run(1.0)
+    assert rig.core.holding_still
+    rig.core.submit_preset(rig.now, 'high_score')
+    assert not rig.core.holding_still
+
+
 def test_feedforward_alone_tracks_a_slow_trajectory(arm, controller_config):
     """No feedback at all: the coupled inverse dynamics and the motor model, evaluated at
     the setpoint, drive the simulated arm along a slow two-second move."""

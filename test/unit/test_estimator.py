@@ -252,3 +252,30 @@ def test_the_noise_a_step_adds_is_white_acceleration_held_over_it(arm, process_n
             assert q[angle, speed] == q[speed, angle] == pytest.approx(variance * dt ** 3 / 2,
                                                                        rel=1e-12)
         assert q[0, 1] == q[0, 3] == q[2, 3] == 0.0
+
+
+@pytest.mark.parametrize('speed_rad_s', [0.0, 0.005, -0.005])
+def test_near_rest_the_mean_moves_on_the_linearisation_as_rk4_moves_it(
+        arm, process_noise_rad_s2, speed_rad_s):
+    """Held (within A's bounds), a period's mean on ẋ = f(x₀) + A (x − x₀) is where RK4 on f
+    itself takes it, to 1e-8 rad and 1e-6 rad/s (the sensors are good to ~1e-3): the bounds A
+    is kept within leave f affine. 0.05 V off the holding volts, the arm starts to move."""
+    q = (0.6, -0.8)
+    volts = np.array(ArmDynamics(arm).voltage_for(q, (0.0, 0.0), (0.0, 0.0))) + 0.05
+    ends, linear = [], []
+    for exact in (False, True):
+        estimator = ArmEstimator(arm, process_noise_rad_s2)
+        estimator.reset(q, (0.0, 0.0))
+        estimator._kf.x[2:4] = speed_rad_s
+        if exact:
+            estimator._linear = lambda *args: None
+        else:
+            along = estimator._linear
+            estimator._linear = lambda *args: linear.append(along(*args)) or linear[-1]
+        for _ in range(3):
+            estimator.predict(volts, 0.02)
+        ends.append(estimator.state)
+    assert len(linear) == 3 and all(end is not None for end in linear)
+    np.testing.assert_allclose(ends[0][:2], ends[1][:2], rtol=0.0, atol=1e-8)
+    np.testing.assert_allclose(ends[0][2:], ends[1][2:], rtol=0.0, atol=1e-6)
+    assert np.max(np.abs(ends[1][2:] - speed_rad_s)) > 1e-3          # it does move

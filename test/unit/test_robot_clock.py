@@ -28,6 +28,9 @@ HOLD = Profile(0.0, PERIOD_S, ((20.0, 1.0), (20.0, 1.0)),
     (SimConfig, 'sim', 'robot_loop_phase_s', -0.001),
     (ControllerConfig, 'controller', 'command_mode', 'torque'),
     (ControllerConfig, 'controller', 'robot_feedback_share', 1.5),
+    (ControllerConfig, 'controller', 'holding_rate_hz', 30.0),      # 50 Hz / 30 not whole
+    (ControllerConfig, 'controller', 'holding_rate_hz', 100.0),     # faster than the loop
+    (ControllerConfig, 'controller', 'holding_rate_hz', 0.0),
 ])
 def test_bad_robot_loop_settings_are_refused_naming_them(node, settings, name, value):
     params = read_parameter_files([], settings)
