@@ -9,9 +9,9 @@ integrates), RK4 on substeps of at most ``MAX_SUBSTEP_S``, and stable (``substep
 joints clamped at their hard stops as the plant does. Covariance P⁺ = F P Fᵀ + Q: F is the
 RK4 substeps' map of the linearised ẋ = A x, A = ∂f/∂x by finite differences at the start
 of the step; Q is piecewise-constant white acceleration of σ = ``process_noise_rad_s2`` per
-joint plus a slow random walk of the encoder zeros. While a step stays where A holds (the
-F_KEPT bounds: a held or slowly moving arm), the mean takes the same RK4 substeps on the
-linearisation ẋ = f(x₀) + A (x − x₀): one model call, not four a substep.
+joint plus a slow random walk of the encoder zeros. While a step stays where A holds
+(``linearisation.py``: a held or slowly moving arm), the mean takes the same RK4 substeps on
+the linearisation ẋ = f(x₀) + A (x − x₀): one model call, not four a substep.
 
 Update, z = [potentiometers, reported velocities, encoders], each measurement linear in x:
 
@@ -40,7 +40,8 @@ from filterpy.kalman import ExtendedKalmanFilter
 import numpy as np
 
 from arm_control.config import ArmConfig
-from arm_control.model.dynamics import ArmDynamics, COULOMB_SMOOTHING_RAD_S, rk4
+from arm_control.control.linearisation import SAME_STEP_S, StepLinearisation
+from arm_control.model.dynamics import ArmDynamics, rk4
 
 # RK4 substep of the prediction: accurate at the fastest mode without friction (≈ −110 /s,
 # the elbow motor's back-EMF with the arm straight) where one 20 ms step would not be;
@@ -55,24 +56,12 @@ RESET_GATE_SIGMA = 8.0
 ZERO_DRIFT_RAD_PER_SQRT_S = 4e-3
 # Floor on every sensor's noise, so that S stays invertible with ideal sensors configured.
 MIN_NOISE = 1e-6
-# Relative finite-difference step of the Jacobian ∂f/∂x.
-JACOBIAN_STEP = 1e-6
-# A = ∂f/∂x is kept from an earlier step while the joints, the command and the bus stay
-# within these of where it was taken (rad, rad/s, V): A moves with cos θ, with ω (the
-# Coriolis terms) and with the torque (∂M⁻¹/∂θb·τ), each by under 1 % of itself there, and
-# a held arm does not pay five model calls a period for it (test_estimator: the estimate
-# moves by under 1e-5 of a unit). Coulomb friction's tanh(ω/ω_s) bends A within ω_s of 0:
-# with it, ω must stay within a tenth of ω_s.
-F_KEPT_RAD, F_KEPT_RAD_S, F_KEPT_V = 1e-3, 5e-2, 0.25
 
 # The last predictions kept with what they started from: a controller predicts the same
 # step twice (to when its command acts, then again from the reading it gets then, on the
-# same filter state and command), and takes the second from here. Its two ends are the same
-# robot instant found two ways (the learned loop, the reading's stamp): on a clock of ~1e9 s
-# they differ by rounding, ~1e-7 s; a step this much longer or shorter is the same step
-# (the state moves by ω times it).
+# same filter state and command), and takes the second from here (the same step within
+# SAME_STEP_S, linearisation.py).
 PREDICTIONS_KEPT = 4
-SAME_STEP_S = 1e-6
 
 _POSITION, _VELOCITY, _ZERO = slice(0, 2), slice(2, 4), slice(4, 6)
 
@@ -106,11 +95,7 @@ class ArmEstimator:
         self._h[4:6, 4:6] = -np.eye(2)
         self._kf = _ModelEKF(self._integrate)
         self._q_unit = None                 # (σ², filterpy's Q at dt = 1 s)
-        self._f_at = self._f = None         # (supply, (joints, command, bus)), its A
-        self._maps = None                   # ((A, step, substeps), (F, Φ, Γ)) of the last
-        speed = F_KEPT_RAD_S if not any(j.coulomb_friction_nm for j in arm.joints) \
-            else min(F_KEPT_RAD_S, 0.1 * COULOMB_SMOOTHING_RAD_S)
-        self._f_kept = (F_KEPT_RAD,) * 2 + (speed,) * 2 + (F_KEPT_V,) * 3
+        self.linearisation = StepLinearisation(arm)
         self._updates = {}                  # valid sensors -> (H, R): constant for each set
         self._predictions = deque(maxlen=PREDICTIONS_KEPT)
         self.jump_count = 0         # re-initialisations at a reading: the arm moved under us
@@ -151,7 +136,8 @@ class ArmEstimator:
         joint = kf.x[:4].tolist()
         substeps = max(1, math.ceil(dt_s / self.substep_s - 1e-9))
         step_s = dt_s / substeps
-        kf.F = self._transition(derivative, joint, u_pair, bus, supply, step_s, substeps)
+        kf.F = self.linearisation.transition(derivative, joint, u_pair, bus, supply, step_s,
+                                             substeps)
         kf.Q = self._process_noise(dt_s)
         # x by the model, P = F P Fᵀ + Q
         kf.predict(u=(derivative, joint, u_pair, step_s, substeps))
@@ -307,74 +293,15 @@ class ArmEstimator:
 
     def _integrate(self, x, u):
         """The EKF's mean prediction: RK4 substeps of f, clamped at the stops like the plant;
-        on the linearisation while the step stays within A's bounds (``_linear``)."""
+        on the linearisation while the step stays within A's bounds
+        (``StepLinearisation.moved``)."""
         derivative, joint, voltage, step_s, substeps = u
-        state = self._linear(derivative, joint, voltage, substeps)
+        state = self.linearisation.moved(derivative, joint, voltage, substeps)
         if state is None:
             state = [float(v) for v in x[:4]]
             for _ in range(substeps):
                 state = self._hard_stops(rk4(derivative, state, voltage, step_s))
         return np.concatenate([state, x[_ZERO]])
-
-    def _linear(self, f, joint, voltage, substeps):
-        """RK4's substeps on ẋ = f(x₀) + A (x − x₀) from x₀ = ``joint``: x − x₀ = Σₖ Φᵏ Γ f(x₀)
-        over k < n, Φ and Γ a substep's (``_transition``); None where the step ends beyond
-        A's bounds or past a stop."""
-        _, phi, gamma = self._maps[1]
-        step = gamma @ np.array(f(joint, voltage))
-        moved = step
-        for _ in range(substeps - 1):
-            moved = phi @ moved + step
-        end = [a + b for a, b in zip(joint, moved.tolist())]
-        at = self._f_at[1]
-        for i in range(4):
-            if abs(end[i] - at[i]) > self._f_kept[i]:
-                return None
-        for i in range(2):
-            if not self._lower[i] <= end[i] <= self._upper[i]:
-                return None
-        return end
-
-    def _transition(self, f, joint, voltage, bus, supply, step_s, substeps) -> np.ndarray:
-        """The 6×6 F of RK4 substeps from ``joint`` [θa, θb, ωa, ωb] under ``voltage``.
-
-        A = ∂f/∂x by finite differences at the step's start, kept from an earlier step while
-        the joints, the command and the bus stay within the F_KEPT_* bounds of where it was
-        taken (same supply). One substep of ẋ ≈ A x maps by Φ = I + Ah + (Ah)²/2 + (Ah)³/6 +
-        (Ah)⁴/24 (RK4 on a linear system), so F = Φⁿ; plain numpy, cheaper and steadier
-        under load than scipy's expm. Γ = h (I + Ah/2 + (Ah)²/6 + (Ah)³/24) is what a
-        substep adds of a constant ẋ. The same A over the same substeps (within
-        SAME_STEP_S) gives the same maps.
-        """
-        at = (*joint, *voltage, bus)
-        if self._f_at is None or self._f_at[0] is not supply or any(
-                abs(a - b) > bound for a, b, bound in zip(at, self._f_at[1], self._f_kept)):
-            self._f_at, self._f = (supply, at), self._jacobian(f, joint, voltage)
-        if self._maps is not None:
-            (a, kept_step_s, kept_substeps), maps = self._maps
-            if a is self._f and kept_substeps == substeps and \
-                    abs(kept_step_s - step_s) * substeps <= SAME_STEP_S:
-                return maps[0]
-        ah = self._f * step_s
-        ah2 = ah @ ah
-        gamma = step_s * (_EYE4 + ah / 2.0 + ah2 @ (_EYE4 / 6.0 + ah / 24.0))
-        phi = _EYE4 + ah @ (gamma / step_s)
-        transition = _EYE6.copy()
-        transition[:4, :4] = np.linalg.matrix_power(phi, substeps)
-        self._maps = (self._f, step_s, substeps), (transition, phi, gamma)
-        return transition
-
-    @staticmethod
-    def _jacobian(f, joint, voltage) -> np.ndarray:
-        """A = ∂f/∂x (4×4) at ``joint`` under ``voltage``, by forward differences."""
-        f0 = f(joint, voltage)
-        columns = []
-        for i in range(4):
-            delta = JACOBIAN_STEP * max(1.0, abs(joint[i]))
-            shifted = list(joint)
-            shifted[i] += delta
-            columns.append([(a - b) / delta for a, b in zip(f(shifted, voltage), f0)])
-        return np.array(columns).T
 
     def _hard_stops(self, state):
         """A joint past a stop sits at it; motion into the stop is absorbed (as in the plant)."""
@@ -393,9 +320,6 @@ class ArmEstimator:
     def _require_initialised(self) -> None:
         if not self._initialised:
             raise RuntimeError('ArmEstimator: call reset(potentiometer_rad, encoder_rad) first')
-
-
-_EYE4, _EYE6 = np.eye(4), np.eye(6)
 
 
 class _ModelEKF(ExtendedKalmanFilter):

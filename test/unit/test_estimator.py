@@ -8,6 +8,7 @@ import pytest
 from arm_control import config
 from arm_control.control import estimator as estimator_module
 from arm_control.control.estimator import ArmEstimator
+from arm_control.control.linearisation import StepLinearisation
 from arm_control.control.robot_loop import RobotLoop
 from arm_control.model.dynamics import ArmDynamics
 from arm_control.model.plant import ArmPlant
@@ -187,14 +188,14 @@ def test_a_kept_jacobian_leaves_the_estimate_as_it_was(arm, process_noise_rad_s2
     swinging one in every cycle; either way the estimate and its σ
     are those of a filter that takes it anew every cycle, to well under the sensors' noise."""
     made = []
-    jacobian = ArmEstimator._jacobian
-    monkeypatch.setattr(ArmEstimator, '_jacobian',
+    jacobian = StepLinearisation.jacobian
+    monkeypatch.setattr(StepLinearisation, 'jacobian',
                         staticmethod(lambda *args: made.append(1) or jacobian(*args)))
     runs = []
     for keep in (True, False):
         loop = Loop(arm, process_noise_rad_s2, seed=5, reference=reference)
         if not keep:
-            loop.estimator._f_kept = (0.0,) * 7
+            loop.estimator.linearisation.bounds = (0.0,) * 7
         made.clear()
         states, stds = [], []
         for _ in range(250):
@@ -225,7 +226,7 @@ def test_a_step_predicted_again_is_taken_from_the_first(arm, controller_config, 
         computed = []
         loop = RobotLoop(arm, controller_config, planner, seed=4, phase_s=0.007)
         estimator = loop.core.sensing.estimator
-        estimator._f_kept = (0.0,) * 7        # ∂f/∂x at every step: where the filter is
+        estimator.linearisation.bounds = (0.0,) * 7    # ∂f/∂x at every step, where it is
         integrate = estimator._kf._integrate
         estimator._kf._integrate = lambda x, u: computed.append(1) or integrate(x, u)
         loop.run(0.5)
@@ -268,10 +269,11 @@ def test_near_rest_the_mean_moves_on_the_linearisation_as_rk4_moves_it(
         estimator.reset(q, (0.0, 0.0))
         estimator._kf.x[2:4] = speed_rad_s
         if exact:
-            estimator._linear = lambda *args: None
+            estimator.linearisation.moved = lambda *args: None
         else:
-            along = estimator._linear
-            estimator._linear = lambda *args: linear.append(along(*args)) or linear[-1]
+            along = estimator.linearisation.moved
+            estimator.linearisation.moved = \
+                lambda *args: linear.append(along(*args)) or linear[-1]
         for _ in range(3):
             estimator.predict(volts, 0.02)
         ends.append(estimator.state)
