@@ -51,6 +51,11 @@ from arm_control.plans.timer import PlanTimer
 from arm_control.text import quote
 
 
+# The arm holds still once settled at the hold this long (s): the end of its settling, the
+# last of the approach, runs at the full rate.
+STILL_AFTER_S = 1.0
+
+
 class ArmController:
     """Estimation, supervision, control and safety; the goals run by a ``GoalRunner``. One
     ``step`` per control period returns the voltage to apply [Va, Vb] in a ``Step``."""
@@ -78,6 +83,7 @@ class ArmController:
         self.recovery = Recovery(config, self.sensing, self.safety, self.setpoints, self.goals,
                                  self.machine, self.events, self.tracking.pid)
         self.last_step_s: Optional[float] = None
+        self.still_since_s: Optional[float] = None     # settled at the hold since
         self.last_step: Optional[Step] = None             # what ``step`` returned last
         self.stops = Stops(config, self.machine, self.goals, self.setpoints, self.events,
                            self.recovery, self.tracking.pid)
@@ -215,6 +221,9 @@ class ArmController:
         """
         said = self.events.said
         self.voltage = self._volts(now_s, reading, reading_time_s, earlier)
+        settled = self._settled_at_the_hold()
+        self.still_since_s = (now_s if self.still_since_s is None else self.still_since_s) \
+            if settled else None
         tracking = self.tracking
         self.last_step = Step(self.voltage.copy(), self.state, self.unpowered, self.estimate,
                               tracking.setpoint, tracking.tracking_error_rad,
@@ -330,11 +339,17 @@ class ArmController:
 
     @property
     def holding_still(self) -> bool:
-        """Holding with nothing to do (no goal, no plan request), the joints as settled as
-        at a goal: within ``goal_tolerance_rad`` of the setpoint, slower than
-        ``settled_velocity_rad_s``, and the feedforward keeping its voltage (its reference
-        is driven by one voltage over however long the loop waits: at rest, once settled,
-        the next period's) -- the loop may tick at ``holding_rate_hz``."""
+        """Settled at the hold for ``STILL_AFTER_S`` and nothing to do (no goal, no plan
+        request): the loop may tick at ``holding_rate_hz``."""
+        return self.still_since_s is not None and not self.requests_waiting and \
+            not self.goals.queue.pending() and \
+            self.last_step_s - self.still_since_s >= STILL_AFTER_S
+
+    def _settled_at_the_hold(self) -> bool:
+        """Holding, the joints as settled as at a goal (within ``goal_tolerance_rad`` of
+        the setpoint, slower than ``settled_velocity_rad_s``), the feedforward keeping its
+        voltage (its reference is driven by one voltage over however long the loop waits:
+        once settled, the next period's is the same)."""
         estimate = self.estimate
         if self.state != S.HOLDING or estimate is None or self.requests_waiting or \
                 self.goals.queue.pending() or not self.tracking.holding:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from arm_control import config
-from arm_control.control.controller import ArmController
+from arm_control.control.controller import ArmController, STILL_AFTER_S
 from arm_control.control.events import EventKind as Kind
 from arm_control.control.state_machine import ArmState
 from arm_control.model.dynamics import ArmDynamics
@@ -63,20 +63,19 @@ def test_holds_the_goal_after_arriving(arm, controller_config, planner):
 
 def test_only_an_arm_held_settled_with_nothing_to_do_holds_still(arm, controller_config,
                                                                  planner):
-    """Holding still (the loop may tick at ``holding_rate_hz``): held, settled as at a goal,
-    no goal waiting; not on the way, nor once a goal or a push comes."""
+    """Holding still (the loop may tick at ``holding_rate_hz``): held, settled as at a goal
+    for STILL_AFTER_S, no goal waiting; not on the way, nor once a goal or a push comes."""
     rig = Rig(arm, controller_config, planner, seed=4)
     rig.core.submit_preset(rig.now, 'mid_score')
     assert not rig.core.holding_still
     assert rig.run(1.0, rig.in_state(ArmState.TRACKING)) and not rig.core.holding_still
     assert rig.run(5.0, rig.in_state(ArmState.HOLDING))
-    rig.run(0.5)
-    assert rig.core.holding_still
+    assert not rig.core.holding_still                   # the end of its settling
+    assert rig.run(STILL_AFTER_S + 1.0, lambda: rig.core.holding_still)
     rig.plant.state[2] += 0.5                           # a push: 0.5 rad/s at the shoulder
     rig.step()
     assert rig.core.state == ArmState.HOLDING and not rig.core.holding_still
-    rig.run(1.0)
-    assert rig.core.holding_still
+    assert rig.run(STILL_AFTER_S + 1.0, lambda: rig.core.holding_still)
     rig.core.submit_preset(rig.now, 'high_score')
     assert not rig.core.holding_still
 
