@@ -346,17 +346,11 @@ class ArmController:
             self.last_step_s - self.still_since_s >= STILL_AFTER_S
 
     def _settled_at_the_hold(self) -> bool:
-        """Holding, the joints as settled as at a goal (within ``goal_tolerance_rad`` of
-        the setpoint, slower than ``settled_velocity_rad_s``), the feedforward keeping its
-        voltage (its reference is driven by one voltage over however long the loop waits:
-        once settled, the next period's is the same)."""
-        estimate = self.estimate
-        if self.state != S.HOLDING or estimate is None or self.requests_waiting or \
-                self.goals.queue.pending() or not self.tracking.holding:
-            return False
-        tolerance, settled = self.config.goal_tolerance_rad, self.config.settled_velocity_rad_s
-        return all(abs(e) <= tolerance for e in self.tracking.tracking_error_rad) and \
-            all(abs(w) <= settled for w in estimate[2:])
+        """Holding with nothing to do, settled as at a goal (``Tracking.settled``)."""
+        estimate, config = self.estimate, self.config
+        return self.state == S.HOLDING and estimate is not None and not self.requests_waiting \
+            and not self.goals.queue.pending() and self.tracking.settled(
+                estimate, config.goal_tolerance_rad, config.settled_velocity_rad_s)
 
     def pending_goals(self):
         """The current goal (first) and the queued ones, in the order they will be visited."""

@@ -63,6 +63,13 @@ class Tracking:
         each period (``PeriodFeedforward``)."""
         return self.feedforward.holding is not None
 
+    def settled(self, estimate, tolerance_rad: float, speed_rad_s: float) -> bool:
+        """Within ``tolerance_rad`` of the setpoint, slower than ``speed_rad_s``, and the
+        feedforward keeping its voltage (its reference is driven by one voltage over however
+        long the loop waits: once settled, the next period's is the same)."""
+        return self.holding and all(abs(e) <= tolerance_rad for e in self.tracking_error_rad) \
+            and all(abs(w) <= speed_rad_s for w in estimate[2:])
+
     def stop(self) -> None:
         """At 0 V: no error to track."""
         self.tracking_error_rad = np.zeros(2)

@@ -59,9 +59,12 @@ def test_the_idle_worker_waits_for_requests_at_planning_priority(worker_and_answ
         pytest.skip('SCHED_FIFO refused here (no rtprio limit nor CAP_SYS_NICE)')
     wanted = (os.SCHED_FIFO, controller.planning_priority)
     deadline = time.monotonic() + 60.0          # its warm-up runs at normal priority first
-    while main_thread_policy(worker.process.pid) != wanted and time.monotonic() < deadline:
+    policy = main_thread_policy(worker.process.pid)
+    while policy != wanted and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert main_thread_policy(worker.process.pid) == wanted
+        # One reading: between two, the worker may take a setting (at normal priority).
+        policy = main_thread_policy(worker.process.pid)
+    assert policy == wanted
 
 
 def test_a_timed_plan_comes_on_the_thread_results_thread_id_names(worker_and_answers):
