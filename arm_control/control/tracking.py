@@ -57,17 +57,13 @@ class Tracking:
         self.feedforward_v, self.feedback_v = feedforward, feedback
         return np.clip(total, -bus, bus)
 
-    @property
-    def holding(self) -> bool:
-        """The feedforward keeps its voltage: the setpoint at rest, held by the same answer
-        each period (``PeriodFeedforward``)."""
-        return self.feedforward.holding is not None
-
     def settled(self, estimate, tolerance_rad: float, speed_rad_s: float) -> bool:
         """Within ``tolerance_rad`` of the setpoint, slower than ``speed_rad_s``, and the
-        feedforward keeping its voltage (its reference is driven by one voltage over however
-        long the loop waits: once settled, the next period's is the same)."""
-        return self.holding and all(abs(e) <= tolerance_rad for e in self.tracking_error_rad) \
+        feedforward keeping its voltage (``PeriodFeedforward.holding``: its reference is
+        driven by one voltage over however long the loop waits; once settled, the next
+        period's is the same)."""
+        return self.feedforward.holding is not None \
+            and all(abs(e) <= tolerance_rad for e in self.tracking_error_rad) \
             and all(abs(w) <= speed_rad_s for w in estimate[2:])
 
     def stop(self) -> None:
